@@ -113,7 +113,7 @@ def set_backend(name: str = "auto") -> str:
     return name
 
 
-def backend() -> str:
+def get_backend() -> str:
     """The active backend, selecting the default ("auto") on first use."""
     if _backend is None:
         set_backend(os.environ.get("PBR_BACKEND", "auto"))
@@ -121,13 +121,13 @@ def backend() -> str:
 
 
 def variant() -> str:
-    return f"{backend()}_ad_spectral"
+    return f"{get_backend()}_ad_spectral"
 
 
 def ensure() -> None:
     """Make sure a backend is active (Mitsuba variant set); call before building arrays."""
     if _backend is None or mi.variant() != variant():
         if _backend is None:
-            backend()
+            get_backend()
         else:
             mi.set_variant(variant())

@@ -1,0 +1,65 @@
+"""The BSDF interface shared by every BSDF family.
+
+Directions are in the local shading frame (normal = +z), both pointing away from the
+surface; ``wi`` is toward the previous vertex (the camera side). As in Mitsuba,
+``eval`` returns f(wi, wo) * |cos(theta_o)| (the cosine-weighted BSDF), and
+``sample`` returns a :class:`BSDFSample` whose ``weight`` is eval / pdf.
+
+Each family is a :class:`BSDFType`: it parses its instances from scene dicts and keeps
+their parameters in one structure-of-arrays table, indexed by ``idx`` in kernels.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+# Lobe flags (Python ints: a kernel only contains code for flags a scene has).
+REFLECTION, TRANSMISSION, DIFFUSE, GLOSSY, SPECULAR = 1, 2, 4, 8, 16
+
+
+class BSDFSample:
+    """A sampled direction: ``wo`` (local), its solid-angle ``pdf``, the relative IOR
+    ``eta`` crossed, whether the lobe was a Dirac delta, and ``weight`` = f cos / pdf."""
+
+    DRJIT_STRUCT = {"wo": mi.Vector3f, "pdf": mi.Float, "eta": mi.Float,
+                    "delta": mi.Bool, "weight": mi.Spectrum}
+
+    def __init__(self, wo=None, pdf=None, eta=None, delta=None, weight=None):
+        self.wo = wo if wo is not None else mi.Vector3f(0)
+        self.pdf = pdf if pdf is not None else mi.Float(0)
+        self.eta = eta if eta is not None else mi.Float(1)
+        self.delta = delta if delta is not None else mi.Bool(False)
+        self.weight = weight if weight is not None else mi.Spectrum(0)
+
+
+class ShadingContext:
+    """What a BSDF needs at a hit: the Mitsuba surface interaction (``si.wi`` local,
+    ``si.uv``), the sampled wavelengths and the scene's textures."""
+
+    def __init__(self, si, wl, textures):
+        self.si, self.wl, self.textures = si, wl, textures
+
+
+class BSDFType:
+    """A BSDF family: parse instances, build the parameter table, evaluate/sample."""
+
+    name = ""
+    flags = 0
+
+    def __init__(self):
+        self.instances: list = []
+
+    def add(self, loader, props) -> int:
+        """Parse one instance from ``props`` (a :class:`Props`) and return its index."""
+        raise NotImplementedError
+
+    def build(self) -> None:
+        """(Re)build the Dr.Jit parameter table from the instances."""
+
+    def eval_pdf(self, ctx, idx, wo, active):
+        """(f * |cos theta_o|, pdf of sampling wo) for local direction ``wo``."""
+        raise NotImplementedError
+
+    def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
+        raise NotImplementedError

@@ -1,0 +1,89 @@
+"""``perspective``: the pinhole camera of Mitsuba 3 (same parameters and conventions).
+
+Camera space looks down +z with +y up; image x grows toward camera -x (Mitsuba's
+convention), so ``to_world = look_at(origin, target, up)`` gives the expected view.
+``fov`` is in degrees along ``fov_axis`` (x, y, diagonal, smaller, larger)."""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .films import HDRFilm
+from .samplers import SAMPLERS, IndependentSampler
+from .scene.props import Props
+
+
+def _x_fov(props: Props, aspect: float) -> float:
+    if props.has("focal_length"):
+        if props.has("fov"):
+            raise props.error("fov", "give either 'fov' or 'focal_length', not both")
+        fl = props.raw("focal_length")
+        try:
+            f = float(str(fl).rstrip("m").rstrip("m")) if isinstance(fl, str) else float(fl)
+        except ValueError:
+            raise props.error("focal_length", f"expected e.g. '50mm', got {fl!r}") from None
+        fov = math.degrees(2.0 * math.atan(math.sqrt(36 ** 2 + 24 ** 2) / (2.0 * f)))
+        axis = "diagonal"
+    else:
+        fov = props.float("fov", min=1e-4, max=179.99)
+        axis = props.string("fov_axis", "x", choices=("x", "y", "diagonal", "smaller", "larger"))
+    if axis == "smaller":
+        axis = "x" if aspect <= 1 else "y"
+    elif axis == "larger":
+        axis = "x" if aspect > 1 else "y"
+    t = math.tan(math.radians(fov) / 2)
+    if axis == "y":
+        t = t * aspect
+    elif axis == "diagonal":
+        t = t * aspect / math.sqrt(aspect * aspect + 1.0)
+    return 2.0 * math.degrees(math.atan(t))
+
+
+class PerspectiveCamera:
+    def __init__(self, props: Props):
+        self.film = HDRFilm(Props({"type": "hdrfilm"}, props.key("film")))
+        self.sampler = IndependentSampler()
+        for key, child in props.children():
+            t = child["type"]
+            if t == "hdrfilm":
+                self.film = HDRFilm(props.child(key))
+            elif t in SAMPLERS:
+                self.sampler = SAMPLERS[t](props.child(key))
+            elif t in ("independent", "stratified", "multijitter", "orthogonal", "ldsampler"):
+                raise props.error(key, f"sampler {t!r} is not supported yet (supported: independent)")
+            else:
+                raise props.error(key, f"unexpected {t!r} inside a sensor (expected a film or a sampler)")
+        w, h = self.film.size
+        self.aspect = w / h
+        self.x_fov = _x_fov(props, self.aspect)
+        self.to_world = props.transform("to_world")
+        lin = self.to_world[:3, :3]
+        if not np.allclose(lin.T @ lin, np.eye(3), atol=1e-4):
+            raise props.error("to_world", "the camera-to-world transform must be rigid (no scale or shear)")
+        self.near_clip = props.float("near_clip", 1e-2, min=0.0)
+        self.far_clip = props.float("far_clip", 1e4, min=0.0)
+        if self.far_clip <= self.near_clip:
+            raise props.error("far_clip", "must exceed near_clip")
+        self.pp = (props.float("principal_point_offset_x", 0.0), props.float("principal_point_offset_y", 0.0))
+        props.mark("focus_distance", "shutter_open", "shutter_close", "srf")
+        props.finish()
+
+    def sample_ray(self, pos: mi.Point2f) -> mi.Ray3f:
+        """Primary ray through film position ``pos`` in [0,1]^2 (x right, y down)."""
+        tx = math.tan(math.radians(self.x_fov) / 2)
+        x = (1.0 - 2.0 * (pos.x + self.pp[0])) * tx
+        y = (1.0 - 2.0 * (pos.y + self.pp[1])) * tx / self.aspect
+        d = dr.normalize(mi.Vector3f(x, y, 1.0))
+        m = self.to_world
+        dw = mi.Vector3f(*[m[r, 0] * d.x + m[r, 1] * d.y + m[r, 2] * d.z for r in range(3)])
+        inv_z = dr.rcp(d.z)
+        near_t, far_t = self.near_clip * inv_z, self.far_clip * inv_z
+        o = mi.Point3f(*m[:3, 3].tolist()) + dw * near_t
+        return mi.Ray3f(o, dw, far_t - near_t, 0.0, mi.Spectrum(0))
+
+
+SENSORS = {"perspective": PerspectiveCamera}

@@ -1,0 +1,159 @@
+"""Command line interface: ``pbr render [SCENE] -o OUT ...`` (also ``python -m pbr``).
+
+Uses only pbr's public API (set_backend, cornell_box, load_dict, load_file, render) and
+:func:`pbr.image.write_image`. Loading and output errors print ``pbr: error: <message>``
+on stderr and exit with status 2, without a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+
+from .image import TONEMAPS, WRITE_EXTENSIONS, write_image
+
+EXIT_ERROR = 2
+
+
+def _parse_value(text: str):
+    """A -D value: int if it parses as one, else float, else the string itself."""
+    for conv in (int, float):
+        try:
+            return conv(text)
+        except ValueError:
+            pass
+    return text
+
+
+def _define(text: str):
+    name, sep, value = text.partition("=")
+    name = name.strip()
+    if not sep or not name:
+        raise argparse.ArgumentTypeError(f"expected name=value, got {text!r}")
+    return name, _parse_value(value)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="pbr", description="pbr: a spectral, differentiable renderer on Dr.Jit.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    r = sub.add_parser("render", help="render a scene to an image",
+                       description="Render SCENE (Mitsuba XML), or the built-in Cornell box.")
+    r.add_argument("scene", nargs="?", metavar="SCENE",
+                   help="scene file; omitted: the built-in Cornell box")
+    r.add_argument("-o", "--output", metavar="OUT",
+                   help="output image (.exr or .png); default out/<scene-stem>.exr")
+    r.add_argument("--png", metavar="PNGPATH", help="also write a tone-mapped sRGB PNG here")
+    r.add_argument("--spp", type=int, default=0,
+                   help="samples per pixel (0: the scene's own sample count)")
+    r.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    r.add_argument("--backend", choices=("auto", "llvm", "cuda"), default="auto",
+                   help="Dr.Jit backend (default auto: CUDA if usable, else LLVM)")
+    r.add_argument("--tonemap", choices=TONEMAPS, default="clamp",
+                   help="tone mapping for PNG output (default clamp)")
+    r.add_argument("-D", dest="defines", action="append", type=_define, default=[],
+                   metavar="NAME=VALUE",
+                   help="scene parameter override passed to load_file (repeatable); "
+                        "numbers become int/float")
+    return parser
+
+
+def _scene_spp(scene):
+    spp = getattr(scene, "spp", None)
+    if callable(spp):
+        spp = spp()
+    try:
+        return int(spp) if spp is not None else None
+    except (TypeError, ValueError):
+        return None
+
+
+class UsageError(Exception):
+    """A user-facing error: printed as ``pbr: error: <message>``, exit status 2."""
+
+
+def _load(args):
+    """Select the backend and load the scene; user errors become :class:`UsageError`."""
+    import pbr
+
+    if args.scene is None and args.defines:
+        raise UsageError("-D overrides apply to scene files; none given "
+                         "(the built-in Cornell box takes no parameters)")
+    if args.scene is not None and not os.path.isfile(args.scene):
+        raise UsageError(f"scene file not found: {args.scene}")
+    try:
+        pbr.set_backend(args.backend)
+        if args.scene is None:
+            return pbr.load_dict(pbr.cornell_box())
+        return pbr.load_file(args.scene, **dict(args.defines))
+    except (ValueError, FileNotFoundError, pbr.BackendError) as e:
+        raise UsageError(str(e)) from e
+
+
+def _render(args) -> int:
+    import pbr
+
+    if args.scene is None:
+        name = "cornell"
+    else:
+        name = os.path.splitext(os.path.basename(args.scene))[0] or "scene"
+    out = args.output or os.path.join("out", f"{name}.exr")
+    if args.spp < 0:
+        raise UsageError(f"--spp must be >= 0, got {args.spp}")
+    targets = [out] + ([args.png] if args.png else [])
+    for path in targets:  # fail before a long render, not after
+        ext = os.path.splitext(path)[1].lower()
+        if ext not in WRITE_EXTENSIONS:
+            raise UsageError(f"cannot write {path!r}: unsupported extension "
+                             f"{ext or '(none)'!r}; supported: {', '.join(WRITE_EXTENSIONS)}")
+
+    scene = _load(args)
+    # Errors from here on are pbr bugs, not user errors: they keep their traceback.
+    t0 = time.perf_counter()
+    # np.asarray forces evaluation of Dr.Jit's lazy result, so the time includes
+    # kernel compilation and execution.
+    img = np.asarray(pbr.render(scene, spp=args.spp, seed=args.seed), dtype=np.float32)
+    elapsed = time.perf_counter() - t0
+
+    written = []
+    for path in targets:
+        try:
+            write_image(path, img, tonemap=args.tonemap)
+        except ValueError as e:  # unsupported extension, NaN/Inf pixels
+            raise UsageError(str(e)) from e
+        except OSError as e:
+            raise UsageError(f"cannot write {path}: {e.strerror or e}") from e
+        written.append(path)
+
+    h, w = img.shape[:2]
+    spp = args.spp if args.spp > 0 else _scene_spp(scene)
+    if spp is not None and elapsed > 0:
+        rate = f"{w * h * spp / elapsed / 1e6:.2f} Msamples/s"
+    else:
+        rate = "? Msamples/s"
+    print(f"rendered {name}: {w}x{h}, {spp if spp is not None else '?'} spp, "
+          f"{elapsed:.2f} s, {rate} -> {', '.join(written)}")
+    return 0
+
+
+def main(argv=None) -> int:
+    """Run the CLI with ``argv`` (default ``sys.argv[1:]``); returns the exit status."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # --help (0) or a usage error (2, message already printed)
+        return e.code if isinstance(e.code, int) else EXIT_ERROR
+    try:
+        return _render(args)  # "render" is the only command
+    except UsageError as e:
+        print(f"pbr: error: {e}", file=sys.stderr)
+        return EXIT_ERROR
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,40 @@
+"""``hdrfilm``: the image the camera develops, in linear sRGB.
+
+Each camera sample contributes  w * XYZ(L)  and  w  to its pixel (w: the filter weight of
+filter importance sampling); the developed pixel is the ratio, converted to sRGB. Samples
+whose filter offset lands outside the image get w = 0, so border pixels average over the
+image only, as Mitsuba's film does."""
+
+from __future__ import annotations
+
+from .filters import FILTERS, GaussianFilter
+from .scene.props import Props
+
+
+class HDRFilm:
+    def __init__(self, props: Props):
+        self.width = props.int("width", 768, min=1)
+        self.height = props.int("height", 576, min=1)
+        self.pixel_format = props.string("pixel_format", "rgb", choices=("rgb",))
+        props.string("component_format", "float32", choices=("float16", "float32"))
+        props.string("file_format", "openexr", choices=("openexr", "exr"))
+        for k in ("crop_offset_x", "crop_offset_y"):
+            if props.int(k, 0) != 0:
+                raise props.error(k, "film cropping is not supported yet")
+        for k, d in (("crop_width", self.width), ("crop_height", self.height)):
+            if props.int(k, d) != d:
+                raise props.error(k, "film cropping is not supported yet")
+        if props.bool("sample_border", False):
+            raise props.error("sample_border", "sample_border=true is not supported")
+        self.rfilter = GaussianFilter(Props({"type": "gaussian"}, props.key("rfilter")))
+        for key, child in props.children():
+            if child["type"] in FILTERS:
+                self.rfilter = FILTERS[child["type"]](props.child(key))
+            else:
+                raise props.error(key, f"unsupported reconstruction filter {child['type']!r} "
+                                       f"(supported: {', '.join(FILTERS)})")
+        props.finish()
+
+    @property
+    def size(self):
+        return self.width, self.height

@@ -1,0 +1,142 @@
+"""The bridge to Mitsuba's ray tracer (Embree on the CPU, OptiX on CUDA).
+
+pbr hands its shapes to Mitsuba (``optimize=False`` keeps one Mitsuba shape per pbr
+shape, so ``shape_index`` of a hit indexes pbr's own material/light tables) and uses
+only intersection, surface-interaction and shape-sampling queries. Meshes from files
+are read with trimesh and given to Mitsuba as ``mi.Mesh`` objects.
+"""
+
+from __future__ import annotations
+
+import os
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .scene.props import Props, SceneError
+
+# Parameters each shape type understands (beyond bsdf/emitter/id).
+SHAPE_PARAMS = {
+    "rectangle": ("to_world", "flip_normals"),
+    "disk": ("to_world", "flip_normals"),
+    "cube": ("to_world", "flip_normals"),
+    "sphere": ("to_world", "flip_normals", "center", "radius"),
+    "cylinder": ("to_world", "flip_normals", "p0", "p1", "radius"),
+    "obj": ("to_world", "flip_normals", "filename", "face_normals", "flip_tex_coords"),
+    "ply": ("to_world", "flip_normals", "filename", "face_normals", "flip_tex_coords"),
+}
+MESH_FILES = ("obj", "ply")
+
+
+def _to_mi_transform(m: np.ndarray):
+    return mi.ScalarTransform4f(m.astype(np.float64))
+
+
+def load_mesh_file(props: Props, path: str) -> "mi.Mesh":
+    """Read an .obj/.ply file with trimesh into an ``mi.Mesh`` in world space.
+
+    Conventions follow Mitsuba's own loaders: OBJ texture coordinates are flipped
+    vertically (``flip_tex_coords``, default true); missing vertex normals are
+    recomputed (smooth) unless ``face_normals`` is true."""
+    import trimesh
+    to_world = props.transform("to_world")
+    face_normals = props.bool("face_normals", False)
+    flip_tc = props.bool("flip_tex_coords", props.type == "obj")
+    flip_normals = props.bool("flip_normals", False)
+    try:
+        mesh = trimesh.load(path, process=False, force="mesh", maintain_order=True)
+    except Exception as e:
+        raise props.error("filename", f"cannot read mesh {path!r}: {e}") from None
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    f = np.asarray(mesh.faces, dtype=np.uint32)
+    if len(f) == 0:
+        raise props.error("filename", f"mesh {path!r} has no faces")
+    has_n = "vertex_normals" in mesh._cache.cache or getattr(mesh, "_vertex_normals_from_file", False)
+    n = np.asarray(mesh.vertex_normals, dtype=np.float64) if (has_n and not face_normals) else None
+    uv = None
+    vis = getattr(mesh, "visual", None)
+    if vis is not None and getattr(vis, "uv", None) is not None and len(vis.uv) == len(v):
+        uv = np.asarray(vis.uv, dtype=np.float64).copy()
+        if flip_tc:
+            uv[:, 1] = 1.0 - uv[:, 1]
+    vw = v @ to_world[:3, :3].T + to_world[:3, 3]
+    m = mi.Mesh(os.path.basename(path), len(vw), len(f),
+                has_vertex_normals=n is not None, has_vertex_texcoords=uv is not None)
+    params = mi.traverse(m)
+    params["vertex_positions"] = mi.Float(vw.astype(np.float32).ravel())
+    params["faces"] = mi.UInt32(f.ravel())
+    if n is not None:
+        nt = np.linalg.inv(to_world[:3, :3]).T
+        nw = n @ nt.T
+        nw /= np.maximum(np.linalg.norm(nw, axis=1, keepdims=True), 1e-30)
+        params["vertex_normals"] = mi.Float(nw.astype(np.float32).ravel())
+    if uv is not None:
+        params["vertex_texcoords"] = mi.Float(uv.astype(np.float32).ravel())
+    params.update()
+    if n is None and not face_normals:
+        m.recompute_vertex_normals()
+    if flip_normals:
+        fl = np.asarray(f)[:, ::-1].copy()
+        params["faces"] = mi.UInt32(fl.ravel())
+        params.update()
+        if n is None and not face_normals:
+            m.recompute_vertex_normals()
+    return m
+
+
+def shape_to_mitsuba(props: Props, resolve_path):
+    """The Mitsuba object or dict for one shape (geometry only, no BSDF/emitter)."""
+    t = props.type
+    if t not in SHAPE_PARAMS:
+        raise props.error(None, f"unsupported shape type {t!r} (supported: {', '.join(SHAPE_PARAMS)})")
+    if t in MESH_FILES:
+        path = resolve_path(props.string("filename"), props.key("filename"))
+        return load_mesh_file(props, path)
+    d = {"type": t}
+    for k in SHAPE_PARAMS[t]:
+        if not props.has(k):
+            continue
+        if k == "to_world":
+            d[k] = _to_mi_transform(props.transform(k))
+        elif k == "flip_normals":
+            d[k] = props.bool(k)
+        elif k in ("center", "p0", "p1"):
+            d[k] = mi.ScalarPoint3f(*props.vector3(k))
+        elif k == "radius":
+            d[k] = props.float(k, min=0.0)
+    return d
+
+
+class Geometry:
+    """Mitsuba scene holding the shapes; ray queries for the integrators."""
+
+    def __init__(self, shapes: list):
+        d = {"type": "scene"}
+        for i, s in enumerate(shapes):
+            d[f"shape_{i:06d}"] = s
+        try:
+            self.mi_scene = mi.load_dict(d, optimize=False)
+        except Exception as e:
+            raise SceneError(f"scene: Mitsuba could not build the geometry: {e}") from None
+        if len(self.mi_scene.shapes()) != len(shapes):
+            raise SceneError("scene: internal error: shape count mismatch in geometry")
+        ids = [s.id() for s in self.mi_scene.shapes()]
+        order = {name: i for i, name in enumerate(ids)}
+        # Mitsuba may reorder shapes; map its shape_index to pbr's shape order.
+        perm = [int(name.split("_")[-1]) if name.startswith("shape_") else i for i, name in enumerate(ids)]
+        self.to_pbr_shape = mi.UInt32(perm)
+        self._identity = perm == list(range(len(perm)))
+        del order
+
+    def intersect(self, ray: mi.Ray3f, active):
+        """(surface interaction, pbr shape index) of the closest hit."""
+        pi = self.mi_scene.ray_intersect_preliminary(ray, False, active)
+        si = pi.compute_surface_interaction(ray, mi.RayFlags.All, active)
+        shape = pi.shape_index if self._identity else dr.gather(mi.UInt32, self.to_pbr_shape, pi.shape_index, active)
+        return si, shape
+
+    def unoccluded(self, si, p: mi.Point3f, active):
+        """True where the segment from ``si`` to ``p`` is free of occluders."""
+        ray = si.spawn_ray_to(p)
+        return ~self.mi_scene.ray_test(ray, active)

@@ -1,0 +1,167 @@
+"""Sampling integrators: camera samples -> radiance -> developed image.
+
+One render *pass* is one megakernel over ``width * height * spp_pass`` camera samples laid
+out pixel-major, so a pixel's samples are summed with ``dr.block_sum`` (no atomics).
+Passes bound memory; their number follows from ``PBR_MAX_SAMPLES_PER_PASS``.
+
+Differentiation follows Path Replay Backpropagation: ``sample`` is written once with a
+``mode``; the primal pass accumulates radiance, the adjoint passes replay the same
+paths (same random numbers) and propagate the adjoint radiance to scene parameters.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .. import spectrum as spec
+from ..samplers import IndependentSampler
+from ..spectrum import SampledWavelengths
+
+PRIMAL, FORWARD, BACKWARD = "primal", "forward", "backward"
+MAX_SAMPLES_PER_PASS = int(os.environ.get("PBR_MAX_SAMPLES_PER_PASS", 1 << 22))
+
+
+class SamplingIntegrator:
+    name = ""
+    light_sampler = "power"
+
+    # -- subclasses -----------------------------------------------------------------
+    def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
+        """(radiance L (primal) / its derivative (forward), valid mask)."""
+        raise NotImplementedError
+
+    # -- camera samples ---------------------------------------------------------------
+    def _plan(self, scene, sensor, spp):
+        cam = scene.sensors[sensor]
+        w, h = cam.film.size
+        spp = int(spp) if spp else cam.sampler.sample_count
+        per_pass = max(1, min(spp, MAX_SAMPLES_PER_PASS // (w * h)))
+        while spp % per_pass:
+            per_pass -= 1
+        return cam, w, h, spp, per_pass, spp // per_pass
+
+    def _camera_samples(self, cam, w, h, spp, per_pass, pass_index, seed):
+        """Rays, wavelengths, filter weights and RNGs of one pass."""
+        n = w * h * per_pass
+        idx = dr.arange(mi.UInt32, n)
+        pixel = idx // per_pass
+        sub = idx - pixel * per_pass
+        p_index = dr.opaque(mi.UInt32, pass_index)
+        sample_index = pixel * spp + p_index * per_pass + sub
+        rng = IndependentSampler.make_rng(sample_index, dr.opaque(mi.UInt32, seed & 0xFFFFFFFF))
+        wl = SampledWavelengths.sample_visible(rng.next_float32())
+        off, weight = cam.film.rfilter.sample(mi.Point2f(rng.next_float32(), rng.next_float32()))
+        px = mi.Float(pixel % w) + 0.5 + off.x
+        py = mi.Float(pixel // w) + 0.5 + off.y
+        inside = (px >= 0) & (px < w) & (py >= 0) & (py < h)
+        weight = dr.select(inside, weight, 0.0)
+        ray = cam.sample_ray(mi.Point2f(px / w, py / h))
+        return rng, wl, ray, weight, inside
+
+    # -- rendering ------------------------------------------------------------------------
+    def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
+        """Primal image: ``mi.TensorXf`` (H, W, 3), linear sRGB."""
+        cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
+        sum_xyz = np.zeros((w * h, 3))
+        sum_w = np.zeros(w * h)
+        bar = _progress(n_pass, progress)
+        with dr.suspend_grad():
+            for p in range(n_pass):
+                rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
+                L, _ = self.sample(scene, rng, ray, wl, PRIMAL, None, None, inside)
+                xyz = spec.to_xyz(L, wl) * weight
+                xyz = dr.select(dr.isfinite(xyz), xyz, 0.0)
+                dr.eval(xyz, weight)
+                sx = dr.block_sum(xyz, per_pass)
+                sw = dr.block_sum(weight, per_pass)
+                sum_xyz += np.array(sx).T
+                sum_w += np.array(sw)
+                if bar:
+                    bar.update(1)
+        if bar:
+            bar.close()
+        rgb = spec.xyz_to_srgb(sum_xyz / np.maximum(sum_w, 1e-30)[:, None])
+        self.last_weights = sum_w
+        return mi.TensorXf(rgb.astype(np.float32).reshape(h, w, 3))
+
+    def _develop_adjoint(self, wl, weight, pixel_w, grad_img_flat, pixel, active):
+        """Per-sample adjoint radiance dLoss/dL for a film adjoint ``grad_img``."""
+        with dr.resume_grad():
+            L = dr.zeros(mi.Spectrum, dr.width(weight))
+            dr.enable_grad(L)
+            norm = weight * dr.rcp(dr.gather(mi.Float, pixel_w, pixel, active))
+            rgb = spec.xyz_to_srgb(spec.to_xyz(L, wl) * norm)
+            g = mi.Array3f([dr.gather(mi.Float, grad_img_flat, pixel * 3 + k, active) for k in range(3)])
+            dr.backward_from(rgb * g)
+            return dr.grad(L)
+
+    def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0):
+        """Propagate the image adjoint ``grad_img`` (H, W, 3) to the scene parameters."""
+        cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
+        pixel_w = mi.Float(self._pixel_weights(scene, sensor, seed, spp).astype(np.float32))
+        g = mi.Float(np.asarray(grad_img, dtype=np.float32).ravel())
+        for p in range(n_pass):
+            with dr.suspend_grad():
+                rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
+                pixel = dr.arange(mi.UInt32, w * h * per_pass) // per_pass
+                state = rng.state, rng.inc
+                L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
+                dL = self._develop_adjoint(wl, weight, pixel_w, g, pixel, inside)
+                dL = dr.select(dr.isfinite(dL), dL, 0.0)
+                dr.eval(L, dL)
+                rng.state, rng.inc = state
+                self.sample(scene, rng, ray, wl, BACKWARD, dL, L, inside)
+            dr.eval()
+
+    def render_forward(self, scene, sensor=0, seed=0, spp=0):
+        """Forward-mode derivative of the image w.r.t. the gradients set on parameters."""
+        cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
+        sum_xyz = np.zeros((w * h, 3))
+        sum_w = np.zeros(w * h)
+        for p in range(n_pass):
+            with dr.suspend_grad():
+                rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
+                state = rng.state, rng.inc
+                L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
+                dr.eval(L)
+                rng.state, rng.inc = state
+                dL, _ = self.sample(scene, rng, ray, wl, FORWARD, None, L, inside)
+                xyz = spec.to_xyz(dL, wl) * weight
+                xyz = dr.select(dr.isfinite(xyz), xyz, 0.0)
+                dr.eval(xyz, weight)
+                sum_xyz += np.array(dr.block_sum(xyz, per_pass)).T
+                sum_w += np.array(dr.block_sum(weight, per_pass))
+        rgb = spec.xyz_to_srgb(sum_xyz / np.maximum(sum_w, 1e-30)[:, None])
+        return mi.TensorXf(rgb.astype(np.float32).reshape(h, w, 3))
+
+    def _pixel_weights(self, scene, sensor, seed, spp):
+        """Sum of filter weights per pixel (depends only on the random numbers)."""
+        cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
+        sum_w = np.zeros(w * h)
+        with dr.suspend_grad():
+            for p in range(n_pass):
+                _, _, _, weight, _ = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
+                dr.eval(weight)
+                sum_w += np.array(dr.block_sum(weight, per_pass))
+        return np.maximum(sum_w, 1e-30)
+
+
+def _progress(n_pass, progress):
+    if n_pass <= 1 or progress is False:
+        return None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:  # pragma: no cover
+        return None
+    return tqdm(total=n_pass, desc="pbr render", unit="pass", leave=False)
+
+
+def mis_depth_limit(max_depth: int):
+    """Mitsuba's max_depth: -1 = unlimited; otherwise paths have at most max_depth - 1
+    bounces after the camera ray (max_depth = 1 shows only directly visible emitters)."""
+    return math.inf if max_depth < 0 else max_depth

@@ -1,0 +1,127 @@
+"""``path``: unidirectional path tracing with next-event estimation and MIS.
+
+At each vertex: emission found by BSDF sampling is weighted by the power heuristic
+against light sampling; one light is sampled (via the scene's light sampler) and
+weighted against BSDF sampling; the path continues by BSDF sampling, with Russian
+roulette from ``rr_depth`` on. ``max_depth`` has Mitsuba's meaning (-1: unlimited,
+1: only emitters seen directly, 2: direct lighting).
+
+The same routine is the PRB adjoint: in ``FORWARD``/``BACKWARD`` mode it replays a
+path whose primal radiance is ``L_in`` and, at each vertex, differentiates the emitted,
+directly lit and (through the BSDF ratio f/f_detached) reflected radiance.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from ..bsdfs.base import ShadingContext
+from ..lights.lightsamplers import LIGHT_SAMPLERS
+from ..sampling import power_heuristic
+from .base import SamplingIntegrator, PRIMAL, BACKWARD
+
+
+class PathIntegrator(SamplingIntegrator):
+    name = "path"
+
+    def __init__(self, props):
+        self.max_depth = props.int("max_depth", -1, min=-1)
+        self.rr_depth = props.int("rr_depth", 5, min=0)
+        self.hide_emitters = props.bool("hide_emitters", False)
+        self.light_sampler = props.string("light_sampler", "power", choices=LIGHT_SAMPLERS)
+        props.finish()
+
+    def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
+        if self.max_depth == 0:
+            return mi.Spectrum(0.0), mi.Bool(False)
+        return self._sample(scene, rng, ray, wl, mode, dL, L_in, active)
+
+    @dr.syntax
+    def _sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
+        primal = mode == PRIMAL
+        geo, lights, bsdfs, tex = scene.geometry, scene.lights, scene.bsdfs, scene.textures
+        max_depth = self.max_depth if self.max_depth >= 0 else 0xFFFFFFFF
+
+        L = mi.Spectrum(0.0) if primal else mi.Spectrum(L_in)
+        dL_fwd = mi.Spectrum(0.0)
+        beta = mi.Spectrum(1.0)
+        eta = mi.Float(1.0)
+        depth = mi.UInt32(0)
+        prev_p = mi.Point3f(ray.o)
+        prev_pdf = mi.Float(1.0)
+        prev_delta = mi.Bool(True)
+        valid = mi.Bool(False)
+        active = mi.Bool(active)
+        ray = mi.Ray3f(ray)
+
+        while dr.hint(active, label="path"):
+            si, shape = geo.intersect(ray, active)
+            hit = active & si.is_valid()
+            valid |= hit
+
+            # Emission found by BSDF sampling (or seen directly), MIS-weighted.
+            light = dr.gather(mi.UInt32, scene.shape_light, shape, hit)
+            on_light = hit & (light > 0)
+            if self.hide_emitters:
+                on_light &= depth > 0
+            with dr.resume_grad(when=not primal):
+                Le = lights.L(light - 1, si, wl, tex, on_light)
+                pdf_light = lights.pdf_Li(light - 1, prev_p, si, on_light & ~prev_delta)
+                w_hit = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_light))
+                Le = dr.select(on_light, beta * Le * w_hit, 0.0)
+
+            active_next = hit & (depth + 1 < max_depth)
+            ctx = ShadingContext(si, wl, tex)
+            bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, active_next)
+
+            # Next-event estimation: one light sample, MIS-weighted against the BSDF.
+            u_light = rng.next_float32()
+            u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
+            ls = lights.sample_Li(si, u_light, u_pos, wl, tex, active_next)
+            em = active_next & (ls.pdf > 0)
+            em &= geo.unoccluded(si, ls.p, em)
+            wo_em = si.to_local(ls.wi)
+            with dr.resume_grad(when=not primal):
+                f_em, pdf_em = bsdfs.eval_pdf(bsdf_id, ctx, wo_em, em)
+                w_em = power_heuristic(ls.pdf, pdf_em)
+                Ld = dr.select(em, beta * f_em * ls.L * (w_em / ls.pdf), 0.0)
+
+            # Continue the path by sampling the BSDF.
+            u1 = rng.next_float32()
+            u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+            bs = bsdfs.sample(bsdf_id, ctx, u1, u2, active_next)
+            cont = active_next & (bs.pdf > 0)
+
+            if primal:
+                L = L + Le + Ld
+            else:
+                L = L - Le - Ld
+                with dr.resume_grad():
+                    f_bs, _ = bsdfs.eval_pdf(bsdf_id, ctx, bs.wo, cont & ~bs.delta)
+                    f_det = bs.weight * bs.pdf
+                    ratio = dr.select(f_det != 0, f_bs * dr.rcp(dr.detach(f_det)), 0.0)
+                    Lr = L * dr.replace_grad(mi.Spectrum(1.0), ratio)
+                    Lo = Le + Ld + dr.select(cont & ~bs.delta, Lr, 0.0)
+                    if mode == BACKWARD:
+                        dr.backward_from(dL * Lo)
+                    else:
+                        dL_fwd += dr.forward_to(Lo)
+
+            beta *= bs.weight
+            eta *= bs.eta
+            prev_p = mi.Point3f(si.p)
+            prev_pdf = mi.Float(bs.pdf)
+            prev_delta = mi.Bool(bs.delta)
+            ray = si.spawn_ray(si.to_world(bs.wo))
+            depth[hit] = depth + 1
+
+            # Russian roulette (the survival probability is detached, as in Mitsuba).
+            b_max = dr.max(beta)
+            q = dr.minimum(b_max * eta * eta, 0.95)
+            rr = depth >= self.rr_depth
+            survive = rng.next_float32() < q
+            beta[rr] = beta * dr.rcp(dr.detach(q))
+            active = cont & (~rr | survive) & (b_max > 0)
+
+        return (L if primal else dL_fwd), valid

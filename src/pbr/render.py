@@ -1,0 +1,54 @@
+"""``pbr.render``: the image of a scene, differentiable with respect to its parameters.
+
+Same signature as ``mitsuba.render``. Without gradients it runs the integrator's primal
+passes. When any scene parameter has gradients enabled, the image is produced by a
+``dr.CustomOp`` whose backward (forward) derivative runs the integrator's PRB adjoint
+passes with seed ``seed_grad`` and ``spp_grad`` samples, decorrelated from the primal.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from . import backend
+
+
+class _RenderOp(dr.CustomOp):
+    def eval(self, scene, params, sensor, integrator, seed, spp):
+        self.scene, self.sensor, self.integrator = scene, sensor, integrator
+        self.seed, self.spp = seed, spp
+        with dr.suspend_grad():
+            return integrator.render(scene, sensor=sensor, seed=seed[0], spp=spp[0])
+
+    def forward(self):
+        img = self.integrator.render_forward(self.scene, sensor=self.sensor, seed=self.seed[1], spp=self.spp[1])
+        self.set_grad_out(img)
+
+    def backward(self):
+        self.integrator.render_backward(self.scene, self.grad_out(), sensor=self.sensor,
+                                        seed=self.seed[1], spp=self.spp[1])
+
+    def name(self):
+        return "pbr.render"
+
+
+def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, spp=0, spp_grad=0,
+           progress=None):
+    """Render ``scene`` from sensor ``sensor``; returns ``mi.TensorXf`` (H, W, 3), linear
+    sRGB (``np.asarray`` gives float32). ``spp=0`` uses the scene's sampler count."""
+    backend.ensure()
+    integrator = integrator or scene.integrator
+    if not isinstance(sensor, int) or not 0 <= sensor < len(scene.sensors):
+        raise ValueError(f"render: sensor index {sensor!r} out of range (scene has {len(scene.sensors)})")
+    if spp < 0 or spp_grad < 0:
+        raise ValueError("render: spp must be >= 0")
+    if not scene.requires_grad():
+        return integrator.render(scene, sensor=sensor, seed=seed, spp=spp, progress=progress)
+    if seed_grad == 0:
+        seed_grad = seed + 0x9E3779B9 if seed else 0x51ED270B
+    spp_grad = spp_grad or spp
+    from .scene.params import traverse
+    p = params if params is not None else traverse(scene)
+    values = {k: v for k, v in p.items() if dr.grad_enabled(v)}
+    return dr.custom(_RenderOp, scene, values, sensor, integrator, (seed, seed_grad), (spp, spp_grad))

@@ -1,0 +1,175 @@
+"""``load_dict`` / ``load_file``: Mitsuba 3 scene descriptions -> :class:`pbr.scene.Scene`.
+
+Same dict conventions as ``mitsuba.load_dict``: plugin ``type`` names and parameter
+names, ids (the dict key, or an explicit ``id``), references ``{'type': 'ref', 'id': ..}``
+and nested objects. Unknown types and parameters raise :class:`SceneError` naming the
+key path (``scene.small-box.bsdf.reflectance``).
+"""
+
+from __future__ import annotations
+
+import os
+
+from .. import backend
+from .props import Props, SceneError
+
+BSDF_LIKE = {"diffuse", "conductor", "roughconductor", "dielectric", "thindielectric", "roughdielectric",
+             "plastic", "roughplastic", "twosided", "mask", "blendbsdf", "null", "bumpmap", "normalmap",
+             "principled", "principledthin", "coateddiffuse", "coatedconductor", "diffusetransmission",
+             "measured", "hair"}
+EMITTER_LIKE = {"area", "point", "spot", "projector", "directional", "constant", "envmap", "directionalarea"}
+TEXTURE_LIKE = {"rgb", "spectrum", "blackbody", "d65", "uniform", "checkerboard", "bitmap"}
+
+
+class Loader:
+    def __init__(self, d: dict, base_dir: str | None = None):
+        from ..textures import TextureSet
+        from ..bsdfs import BSDFSet
+        from ..lights import LightSet
+        if not isinstance(d, dict) or d.get("type") != "scene":
+            raise SceneError("scene: expected a dict with 'type': 'scene'")
+        self.d = d
+        self.base_dir = base_dir or os.getcwd()
+        self.textures = TextureSet()
+        self.bsdfs = BSDFSet()
+        self.lights = LightSet()
+        self.ids: dict[str, tuple[dict, str]] = {}
+        self._bsdf_cache: dict[int, int] = {}
+        self._collect_ids(d, "scene")
+
+    # -- ids, refs, files ----------------------------------------------------------------
+    def _collect_ids(self, d: dict, path: str) -> None:
+        for k, v in d.items():
+            if isinstance(v, dict) and "type" in v:
+                p = f"{path}.{k}"
+                # Top-level keys are ids; nested objects have one only if given explicitly.
+                oid = v.get("id", k if path == "scene" else None)
+                if v["type"] != "ref" and oid is not None:
+                    if oid in self.ids and self.ids[oid][0] is not v:
+                        raise SceneError(f"{p}: duplicate id {oid!r} (also at {self.ids[oid][1]})")
+                    self.ids[oid] = (v, p)
+                if v["type"] != "ref":
+                    self._collect_ids(v, p)
+
+    def resolve_ref(self, oid: str, path: str) -> dict:
+        if oid not in self.ids:
+            raise SceneError(f"{path}: reference to unknown id {oid!r}")
+        return self.ids[oid][0]
+
+    def resolve_path(self, fname: str, path: str) -> str:
+        full = fname if os.path.isabs(fname) else os.path.join(self.base_dir, fname)
+        if not os.path.exists(full):
+            raise SceneError(f"{path}: file not found: {fname!r} (looked in {self.base_dir})")
+        return full
+
+    def _deref(self, v: dict, path: str) -> tuple[dict, str]:
+        if v.get("type") == "ref":
+            p = Props(v, path, self)
+            oid = p.string("id")
+            p.mark("name")
+            p.finish()
+            return self.resolve_ref(oid, path), self.ids[oid][1]
+        return v, path
+
+    # -- plugins -------------------------------------------------------------------------
+    def bsdf(self, v: dict, path: str) -> int:
+        v, path = self._deref(v, path)
+        if id(v) not in self._bsdf_cache:
+            self._bsdf_cache[id(v)] = self.bsdfs.add(self, Props(v, path, self))
+        return self._bsdf_cache[id(v)]
+
+    def load(self):
+        from .scene import Scene
+        from ..geometry import shape_to_mitsuba, SHAPE_PARAMS
+        from ..cameras import SENSORS
+        from ..integrators import INTEGRATORS
+
+        sensors, integrator_props, shapes = [], None, []
+        shape_bsdf, shape_light, shape_ids = [], [], []
+        default_bsdf = None
+        root = Props(self.d, "scene", self)
+        for key, v in self.d.items():
+            if key == "type":
+                continue
+            path = f"scene.{key}"
+            if not isinstance(v, dict) or "type" not in v:
+                raise SceneError(f"{path}: expected a plugin dict with a 'type', got {type(v).__name__}")
+            root.mark(key)
+            t = v["type"]
+            if t in SENSORS:
+                sensors.append(SENSORS[t](Props(v, path, self)))
+            elif t in INTEGRATORS:
+                if integrator_props is not None:
+                    raise SceneError(f"{path}: a scene has at most one integrator")
+                integrator_props = Props(v, path, self)
+            elif t in SHAPE_PARAMS:
+                p = Props(v, path, self)
+                p.mark("id")
+                geo = shape_to_mitsuba(p, self.resolve_path)
+                sidx = len(shapes)
+                if p.has("bsdf"):
+                    b = self.bsdf(p.raw("bsdf"), p.key("bsdf"))
+                else:
+                    nested = [k for k, c in p.children() if c["type"] in BSDF_LIKE or c["type"] == "ref"]
+                    if nested:
+                        for k in nested[1:]:
+                            raise p.error(k, "a shape takes at most one BSDF")
+                        p.mark(nested[0])
+                        b = self.bsdf(p.raw(nested[0]), p.key(nested[0]))
+                    else:
+                        if default_bsdf is None:
+                            default_bsdf = self.bsdfs.add(self, Props({"type": "diffuse"}, f"{path}.bsdf", self))
+                        b = default_bsdf
+                light = 0
+                em_keys = [k for k, c in p.children() if c["type"] in EMITTER_LIKE]
+                for k in em_keys:
+                    c = p.raw(k)
+                    if c["type"] != "area":
+                        raise p.error(k, f"a shape can only carry an 'area' emitter, got {c['type']!r}")
+                    if light:
+                        raise p.error(k, "a shape takes at most one emitter")
+                    light = self.lights.area.add(self, Props(c, p.key(k), self), sidx) + 1
+                for k in ("interior", "exterior"):
+                    if p.has(k):
+                        raise p.error(k, "participating media are not supported yet")
+                p.finish()
+                shapes.append(geo)
+                shape_bsdf.append(b)
+                shape_light.append(light)
+                shape_ids.append(v.get("id", key))
+            elif t in BSDF_LIKE:
+                self.bsdf(v, path)
+            elif t in TEXTURE_LIKE:
+                from ..textures import load_spectrum
+                load_spectrum(self, v, path, emitter=False)
+            elif t in EMITTER_LIKE:
+                raise SceneError(f"{path}: emitter type {t!r} is not supported yet (supported: area, attached to a shape)")
+            else:
+                raise SceneError(f"{path}: unknown plugin type {t!r}")
+        if not shapes:
+            raise SceneError("scene: the scene has no shapes")
+        if not sensors:
+            from ..cameras import PerspectiveCamera
+            sensors.append(PerspectiveCamera(Props({"type": "perspective", "fov": 45.0}, "scene.sensor", self)))
+        if integrator_props is None:
+            integrator_props = Props({"type": "path"}, "scene.integrator", self)
+        integrator = INTEGRATORS[integrator_props.type](integrator_props)
+        return Scene(self, shapes, shape_bsdf, shape_light, shape_ids, sensors, integrator)
+
+
+def load_dict(d: dict, base_dir: str | None = None):
+    """Build a :class:`pbr.scene.Scene` from a Mitsuba-style scene dict."""
+    backend.ensure()
+    return Loader(d, base_dir).load()
+
+
+def load_file(path: str, **kwargs):
+    """Load a Mitsuba XML scene; keyword arguments override its ``<default>`` values."""
+    from .xml import parse_file
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"{path}: scene file not found")
+    ext = os.path.splitext(path)[1].lower()
+    if ext != ".xml":
+        raise SceneError(f"{path}: unsupported scene format {ext!r} (supported: .xml)")
+    d = parse_file(path, **kwargs)
+    return load_dict(d, base_dir=os.path.dirname(os.path.abspath(path)))

@@ -1,0 +1,75 @@
+"""``pbr.traverse``: the differentiable parameters of a scene, under Mitsuba-style keys.
+
+Keys follow ``mi.traverse`` for the same plugins (``red.reflectance.value``,
+``light.emitter.radiance.value``, ``<id>.reflectance.data`` for bitmaps). Values are
+Dr.Jit arrays: enable gradients on them or assign new values, then call ``update()``
+to rebuild the scene's tables (which keeps the AD graph to the parameters).
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+
+
+class SceneParameters:
+    def __init__(self, scene):
+        self.scene = scene
+        self._owners = {}
+        for tex in scene.textures.items:
+            for name in tex.params:
+                self._owners[f"{tex.path}.{name}"] = (tex, name)
+        self._dirty = set()
+
+    def keys(self):
+        return self._owners.keys()
+
+    def items(self):
+        return [(k, self[k]) for k in self._owners]
+
+    def __contains__(self, key):
+        return key in self._owners
+
+    def __len__(self):
+        return len(self._owners)
+
+    def __iter__(self):
+        return iter(self._owners)
+
+    def _owner(self, key):
+        if key not in self._owners:
+            raise KeyError(f"{key!r} is not a parameter of this scene; known keys: {', '.join(self._owners)}")
+        return self._owners[key]
+
+    def __getitem__(self, key):
+        tex, name = self._owner(key)
+        return tex.params[name]
+
+    def __setitem__(self, key, value):
+        tex, name = self._owner(key)
+        old = tex.params[name]
+        tp = type(old)
+        if type(value) is not tp:
+            try:
+                value = tp(value)
+            except Exception as e:
+                raise TypeError(f"{key}: cannot convert {type(value).__name__} to {tp.__name__}: {e}") from None
+        if dr.width(value) != dr.width(old) or getattr(value, "shape", None) != getattr(old, "shape", None):
+            raise ValueError(f"{key}: shape {getattr(value, 'shape', None)} does not match {getattr(old, 'shape', None)}")
+        tex.params[name] = value
+        self._dirty.add(key)
+
+    def update(self, values: dict | None = None):
+        """Apply ``values`` (if given), then rebuild the tables that depend on parameters."""
+        for k, v in (values or {}).items():
+            self[k] = v
+        self.scene.build()
+        self._dirty.clear()
+        return self
+
+    def __repr__(self):
+        rows = [f"  {k}: {type(v).__name__}{list(getattr(v, 'shape', ()))}" for k, v in self.items()]
+        return "SceneParameters[\n" + "\n".join(rows) + "\n]"
+
+
+def traverse(scene) -> SceneParameters:
+    return SceneParameters(scene)

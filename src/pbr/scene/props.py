@@ -1,0 +1,146 @@
+"""Typed, key-path-aware access to one plugin's dict of parameters.
+
+Every plugin constructor receives a :class:`Props`. Reading a parameter marks it used;
+:meth:`Props.finish` then rejects anything left over, naming its full key path (e.g.
+``scene.red-wall.bsdf.reflectance.valu``), so typos never pass silently.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import numpy as np
+
+
+class SceneError(ValueError):
+    """Invalid scene description; the message starts with the offending key path."""
+
+
+def _is_transform(v) -> bool:
+    return type(v).__name__ in ("ScalarTransform4f", "ScalarTransform4d", "Transform4f", "ScalarAffineTransform4f")
+
+
+class Props:
+    def __init__(self, d: dict, path: str, loader=None):
+        if not isinstance(d, dict):
+            raise SceneError(f"{path}: expected a dict, got {type(d).__name__}")
+        self.d = d
+        self.path = path
+        self.loader = loader
+        self.type = d.get("type")
+        self.id = d.get("id", path.rsplit(".", 1)[-1])
+        self._used = {"type", "id"}
+
+    # -- generic ------------------------------------------------------------------
+    def key(self, name: str) -> str:
+        return f"{self.path}.{name}"
+
+    def error(self, name: str | None, msg: str) -> SceneError:
+        return SceneError(f"{self.key(name) if name else self.path}: {msg}")
+
+    def has(self, name: str) -> bool:
+        return name in self.d
+
+    def raw(self, name: str, default=None):
+        self._used.add(name)
+        return self.d.get(name, default)
+
+    def mark(self, *names: str) -> None:
+        self._used.update(names)
+
+    def finish(self) -> None:
+        """Raise for parameters no plugin code asked for."""
+        unknown = [k for k in self.d if k not in self._used]
+        if unknown:
+            k = unknown[0]
+            raise SceneError(f"{self.key(k)}: unknown parameter {k!r} for plugin type {self.type!r}")
+
+    # -- typed getters --------------------------------------------------------------
+    def float(self, name: str, default=None, min=None, max=None) -> float:
+        v = self.raw(name, default)
+        if v is None:
+            raise self.error(name, "missing required float parameter")
+        if isinstance(v, bool) or not isinstance(v, numbers.Real):
+            try:
+                v = float(v)
+            except (TypeError, ValueError):
+                raise self.error(name, f"expected a number, got {v!r}") from None
+        v = float(v)
+        if not np.isfinite(v):
+            raise self.error(name, f"expected a finite number, got {v}")
+        if min is not None and v < min:
+            raise self.error(name, f"must be >= {min}, got {v}")
+        if max is not None and v > max:
+            raise self.error(name, f"must be <= {max}, got {v}")
+        return v
+
+    def int(self, name: str, default=None, min=None) -> int:
+        v = self.raw(name, default)
+        if v is None:
+            raise self.error(name, "missing required integer parameter")
+        if isinstance(v, bool) or not isinstance(v, numbers.Integral):
+            if isinstance(v, numbers.Real) and float(v).is_integer():
+                v = int(v)
+            else:
+                raise self.error(name, f"expected an integer, got {v!r}")
+        v = int(v)
+        if min is not None and v < min:
+            raise self.error(name, f"must be >= {min}, got {v}")
+        return v
+
+    def bool(self, name: str, default=None) -> bool:
+        v = self.raw(name, default)
+        if not isinstance(v, (bool, np.bool_)):
+            raise self.error(name, f"expected true/false, got {v!r}")
+        return bool(v)
+
+    def string(self, name: str, default=None, choices=None) -> str:
+        v = self.raw(name, default)
+        if v is None:
+            raise self.error(name, "missing required string parameter")
+        if not isinstance(v, str):
+            raise self.error(name, f"expected a string, got {v!r}")
+        if choices is not None and v not in choices:
+            raise self.error(name, f"expected one of {', '.join(map(repr, choices))}, got {v!r}")
+        return v
+
+    def vector3(self, name: str, default=None) -> np.ndarray:
+        v = self.raw(name, default)
+        if v is None:
+            raise self.error(name, "missing required 3-vector")
+        try:
+            a = np.asarray(v, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            a = np.empty(0)
+        if a.size == 1:
+            a = np.repeat(a, 3)
+        if a.size != 3 or not np.all(np.isfinite(a)):
+            raise self.error(name, f"expected 3 finite numbers, got {v!r}")
+        return a
+
+    def transform(self, name: str, default_identity: bool = True) -> np.ndarray:
+        """A 4x4 float64 matrix from a Mitsuba transform object or a 4x4 array."""
+        v = self.raw(name)
+        if v is None:
+            if default_identity:
+                return np.eye(4)
+            raise self.error(name, "missing required transform")
+        if _is_transform(v):
+            m = np.array(v.matrix, dtype=np.float64)
+        else:
+            try:
+                m = np.asarray(v, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise self.error(name, f"expected a transform (mi.ScalarTransform4f or 4x4 array), got {type(v).__name__}") from None
+        m = m.reshape(4, 4) if m.size == 16 else m
+        if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+            raise self.error(name, f"expected a 4x4 finite matrix, got shape {m.shape}")
+        return m
+
+    def child(self, name: str) -> "Props":
+        v = self.raw(name)
+        return Props(v, self.key(name), self.loader)
+
+    def children(self) -> list[tuple[str, dict]]:
+        """Nested plugin dicts (entries that are dicts with a 'type'), in order."""
+        return [(k, v) for k, v in self.d.items() if isinstance(v, dict) and "type" in v]

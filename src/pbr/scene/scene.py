@@ -1,0 +1,42 @@
+"""The assembled scene: geometry (in Mitsuba), and pbr's texture, BSDF and light tables."""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from ..geometry import Geometry
+
+
+class Scene:
+    def __init__(self, loader, shapes, shape_bsdf, shape_light, shape_ids, sensors, integrator):
+        self.textures = loader.textures
+        self.bsdfs = loader.bsdfs
+        self.lights = loader.lights
+        self.geometry = Geometry(shapes)
+        self.mi_scene = self.geometry.mi_scene
+        self.shape_ids = shape_ids
+        self.shape_bsdf = mi.UInt32(shape_bsdf)
+        self.shape_light = mi.UInt32(shape_light)     # light index + 1; 0: not emissive
+        self.sensors = sensors
+        self.integrator = integrator
+        self.build()
+
+    def build(self) -> None:
+        """(Re)build every parameter table from the current parameter values."""
+        self.textures.build()
+        self.bsdfs.build()
+        self.lights.build(self, self.integrator.light_sampler)
+
+    @property
+    def spp(self) -> int:
+        """Samples per pixel requested by the first sensor's sampler."""
+        return self.sensors[0].sampler.sample_count
+
+    def requires_grad(self) -> bool:
+        return any(dr.grad_enabled(v) for t in self.textures.items for v in t.params.values())
+
+    def __repr__(self):
+        w, h = self.sensors[0].film.size
+        return (f"pbr.Scene({len(self.shape_ids)} shapes, {len(self.bsdfs.entries)} BSDFs, "
+                f"{len(self.lights)} lights, {w}x{h}, spp={self.spp}, integrator={self.integrator.name})")

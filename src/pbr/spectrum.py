@@ -1,0 +1,270 @@
+"""Spectral core: sampled wavelengths, RGB upsampling, CIE colour matching.
+
+Conventions (stated once, used everywhere):
+
+* A *sampled spectrum* is an ``mi.Spectrum`` (4 lanes), one value per wavelength of a
+  :class:`SampledWavelengths` (nm, in [360, 830]), as in pbrt-v4.
+* RGB inputs are upsampled with the Jakob-Hanika sigmoid-polynomial model
+  ``S(l) = s(c0 l^2 + c1 l + c2)``, ``s(x) = 1/2 + x / (2 sqrt(1 + x^2))``. The coefficient
+  table is the sRGB table shipped with Mitsuba (``data/srgb.coeff``, 64^3 entries per
+  dominant channel); greys use the closed form. Three forms:
+  *albedo* (rgb clipped to [0, 1]), *unbounded* (``2 max(rgb)`` times the albedo form of
+  ``rgb / (2 max(rgb))``) and *illuminant* (unbounded times the D65 illuminant).
+* CIE 1931 2-degree colour matching functions come from colour-science, tabulated at
+  5 nm and linearly interpolated; D65 is the CIE 5 nm table (``data/cie_d65_5nm.spd``).
+  The normalisations are Mitsuba 3's, so that images agree with Mitsuba's spectral
+  variants: XYZ = mean_i(cmf(l_i) L(l_i) / pdf(l_i)) / ``CIE_Y_INTEGRAL`` and D65 is
+  scaled to unit luminance.
+* Films output linear sRGB (Rec. 709 primaries, D65 white).
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from functools import lru_cache
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from . import backend
+
+LAMBDA_MIN = 360.0
+LAMBDA_MAX = 830.0
+N_WAVELENGTHS = 4
+# Mitsuba 3's normalisation of its 5 nm CIE tables (a unit spectrum has luminance ~1).
+CIE_Y_INTEGRAL = 106.7502593994140625
+_CIE_STEP = 5.0
+_CIE_SAMPLES = 95
+
+# XYZ -> linear sRGB (Rec. 709 primaries, D65 white), the matrix Mitsuba 3 uses.
+XYZ_TO_SRGB = np.array([[3.240479, -1.537150, -0.498535],
+                        [-0.969256, 1.875991, 0.041556],
+                        [0.055648, -0.204043, 1.057311]])
+SRGB_TO_XYZ = np.linalg.inv(XYZ_TO_SRGB)
+
+_DATA = os.path.join(os.path.dirname(__file__), "data")
+
+
+# ----------------------------------------------------------------------------- data
+
+@lru_cache(maxsize=None)
+def cie_tables_np() -> tuple[np.ndarray, np.ndarray]:
+    """(xyz[95, 3], d65[95]) on the 5 nm grid 360..830 nm; d65 has unit luminance."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import colour
+        cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
+    grid = np.arange(_CIE_SAMPLES) * _CIE_STEP + LAMBDA_MIN
+    xyz = np.asarray(cmfs[grid], dtype=np.float64)
+    d65 = np.loadtxt(os.path.join(_DATA, "cie_d65_5nm.spd"))[:, 1]
+    # Scale D65 so that it integrates to a luminance of 1 (as XYZ is computed below).
+    d65 = d65 / (np.sum(d65 * xyz[:, 1]) * _CIE_STEP / CIE_Y_INTEGRAL
+                 - 0.5 * _CIE_STEP * (d65[0] * xyz[0, 1] + d65[-1] * xyz[-1, 1]) / CIE_Y_INTEGRAL)
+    return xyz, d65
+
+
+@lru_cache(maxsize=None)
+def _rgb2spec_np() -> tuple[np.ndarray, np.ndarray]:
+    """The sRGB Jakob-Hanika coefficient table: (scale[res], data[3, res, res, res, 3])."""
+    path = os.path.join(os.path.dirname(mi.__file__), "data", "srgb.coeff")
+    with open(path, "rb") as f:
+        raw = f.read()
+    if raw[:4] != b"SPEC":
+        raise RuntimeError(f"{path}: not an RGB-to-spectrum coefficient table")
+    res = int(np.frombuffer(raw[4:8], np.uint32)[0])
+    scale = np.frombuffer(raw[8:8 + 4 * res], np.float32).copy()
+    n = 9 * res ** 3
+    data = np.frombuffer(raw[8 + 4 * res: 8 + 4 * res + 4 * n], np.float32).copy()
+    return scale, data
+
+
+class _Tables:
+    """Dr.Jit copies of the tables, one set per active variant."""
+    _cache: dict = {}
+
+    @classmethod
+    def get(cls):
+        v = backend.variant()
+        if v not in cls._cache:
+            xyz, d65 = cie_tables_np()
+            scale, data = _rgb2spec_np()
+            t = {
+                "x": mi.Float(xyz[:, 0]), "y": mi.Float(xyz[:, 1]), "z": mi.Float(xyz[:, 2]),
+                "d65": mi.Float(d65),
+                "scale": mi.Float(scale), "coeffs": mi.Float(data), "res": len(scale),
+            }
+            cls._cache[v] = t
+        return cls._cache[v]
+
+
+def _lerp_table(table, lam, active=True):
+    """Linear interpolation of a 5 nm table at wavelengths ``lam`` (0 outside 360-830)."""
+    t = (lam - LAMBDA_MIN) * (1.0 / _CIE_STEP)
+    inside = (lam >= LAMBDA_MIN) & (lam <= LAMBDA_MAX) & active
+    i0 = dr.clip(mi.UInt32(dr.maximum(t, 0)), 0, _CIE_SAMPLES - 2)
+    w1 = t - mi.Float(i0)
+    v0 = dr.gather(mi.Float, table, i0, inside)
+    v1 = dr.gather(mi.Float, table, i0 + 1, inside)
+    return dr.select(inside, dr.fma(w1, v1 - v0, v0), 0.0)
+
+
+def _per_lambda(fn, lam: mi.Spectrum) -> mi.Spectrum:
+    return mi.Spectrum([fn(lam[i]) for i in range(N_WAVELENGTHS)])
+
+
+def cie_xyz(lam: mi.Spectrum):
+    """CIE 1931 colour matching functions (x, y, z) at each wavelength."""
+    t = _Tables.get()
+    return tuple(_per_lambda(lambda l, k=k: _lerp_table(t[k], l), lam) for k in "xyz")
+
+
+def d65(lam: mi.Spectrum) -> mi.Spectrum:
+    """The D65 illuminant, scaled to unit luminance."""
+    t = _Tables.get()
+    return _per_lambda(lambda l: _lerp_table(t["d65"], l), lam)
+
+
+# ------------------------------------------------------------------ wavelengths
+
+class SampledWavelengths:
+    """Four wavelengths (nm) and their sampling densities (1/nm), as in pbrt-v4."""
+
+    DRJIT_STRUCT = {"lambda_": mi.Spectrum, "pdf": mi.Spectrum}
+
+    def __init__(self, lambda_=None, pdf=None):
+        self.lambda_ = lambda_ if lambda_ is not None else mi.Spectrum(0)
+        self.pdf = pdf if pdf is not None else mi.Spectrum(0)
+
+    @staticmethod
+    def sample_visible(u: mi.Float) -> "SampledWavelengths":
+        """Importance-sample the visible range with stratified lanes (pbrt-v4's
+        ``SampleVisibleWavelengths``: density ~ 1/cosh^2(0.0072 (l - 538)))."""
+        lam, pdf = [], []
+        for i in range(N_WAVELENGTHS):
+            up = u + i / N_WAVELENGTHS
+            up = dr.select(up >= 1.0, up - 1.0, up)
+            l = 538.0 - 138.888889 * dr.atanh(0.85691062 - 1.82750197 * up)
+            c = dr.cosh(0.0072 * (l - 538.0))
+            lam.append(l)
+            pdf.append(dr.select((l >= LAMBDA_MIN) & (l <= LAMBDA_MAX), 0.0039398042 / (c * c), 0.0))
+        return SampledWavelengths(mi.Spectrum(lam), mi.Spectrum(pdf))
+
+    def secondary_terminated(self) -> mi.Bool:
+        return self.pdf[1] == 0
+
+    def terminate_secondary(self) -> "SampledWavelengths":
+        """Keep only the first wavelength (for wavelength-dependent refraction)."""
+        pdf = mi.Spectrum(self.pdf[0] * N_WAVELENGTHS, 0, 0, 0)
+        return SampledWavelengths(self.lambda_, dr.select(self.secondary_terminated(), self.pdf, pdf))
+
+
+def to_xyz(L: mi.Spectrum, wl: SampledWavelengths) -> mi.Array3f:
+    """Monte Carlo estimate of the XYZ tristimulus values of the spectrum ``L``."""
+    x, y, z = cie_xyz(wl.lambda_)
+    inv = dr.select(wl.pdf != 0, dr.rcp(wl.pdf), 0.0) * (1.0 / (N_WAVELENGTHS * CIE_Y_INTEGRAL))
+    Lw = L * inv
+    return mi.Array3f(dr.sum(x * Lw), dr.sum(y * Lw), dr.sum(z * Lw))
+
+
+def xyz_to_srgb(xyz):
+    """XYZ -> linear sRGB; works on Dr.Jit Array3f and on numpy (..., 3) arrays."""
+    if isinstance(xyz, np.ndarray):
+        return xyz @ XYZ_TO_SRGB.T
+    m = XYZ_TO_SRGB
+    return type(xyz)(*[m[r, 0] * xyz[0] + m[r, 1] * xyz[1] + m[r, 2] * xyz[2] for r in range(3)])
+
+
+def luminance_rgb(rgb):
+    """Luminance (Y) of linear sRGB values."""
+    m = SRGB_TO_XYZ[1]
+    return m[0] * rgb[0] + m[1] * rgb[1] + m[2] * rgb[2]
+
+
+# ---------------------------------------------------------------- RGB upsampling
+
+_GREY_LIMIT = 8192.0
+
+
+def rgb_to_coeffs(rgb: mi.Color3f) -> mi.Array3f:
+    """Sigmoid-polynomial coefficients for sRGB albedos in [0, 1] (vectorised and
+    differentiable in ``rgb``: a trilinear lookup in the Jakob-Hanika table)."""
+    t = _Tables.get()
+    res = t["res"]
+    rgb = dr.clip(mi.Color3f(rgb), 0.0, 1.0)
+    r, g, b = rgb[0], rgb[1], rgb[2]
+    # Dominant channel i (ties resolved toward the later channel, as the table expects).
+    i = dr.select(g >= r, 1, 0)
+    vi = dr.select(g >= r, g, r)
+    i = mi.UInt32(dr.select(b >= vi, 2, i))
+    z = dr.maximum(dr.maximum(r, g), b)
+    a = dr.select(i == 0, g, dr.select(i == 1, b, r))  # channel (i+1) % 3
+    c = dr.select(i == 0, b, dr.select(i == 1, r, g))  # channel (i+2) % 3
+    sc = (res - 1) / dr.maximum(z, 1e-30)
+    x, y = a * sc, c * sc
+    xi = dr.minimum(mi.UInt32(x), res - 2)
+    yi = dr.minimum(mi.UInt32(y), res - 2)
+    scale = t["scale"]
+    zi = dr.binary_search(0, res - 2, lambda k: dr.gather(mi.Float, scale, k + 1) <= z)
+    zi = dr.minimum(zi, res - 2)
+    s0 = dr.gather(mi.Float, scale, zi)
+    s1 = dr.gather(mi.Float, scale, zi + 1)
+    x1, y1 = x - mi.Float(xi), y - mi.Float(yi)
+    z1 = (z - s0) / (s1 - s0)
+    x0, y0, z0 = 1.0 - x1, 1.0 - y1, 1.0 - z1
+    base = (((i * res + zi) * res + yi) * res + xi) * 3
+    dx, dy, dz = 3, 3 * res, 3 * res * res
+    out = []
+    for k in range(3):
+        def tap(o, k=k):
+            return dr.gather(mi.Float, t["coeffs"], base + o + k)
+        out.append(
+            z0 * (y0 * (x0 * tap(0) + x1 * tap(dx)) + y1 * (x0 * tap(dy) + x1 * tap(dy + dx)))
+            + z1 * (y0 * (x0 * tap(dz) + x1 * tap(dz + dx))
+                    + y1 * (x0 * tap(dz + dy) + x1 * tap(dz + dy + dx))))
+    coeffs = mi.Array3f(out)
+    # Greys have an exact flat solution (the table lookup would divide by zero for black).
+    grey = (r == g) & (g == b)
+    c2 = dr.clip((r - 0.5) * dr.rsqrt(dr.maximum(r * (1.0 - r), 1e-30)), -_GREY_LIMIT, _GREY_LIMIT)
+    return dr.select(grey, mi.Array3f(0.0, 0.0, c2), coeffs)
+
+
+def sigmoid_polynomial(coeffs: mi.Array3f, lam: mi.Spectrum) -> mi.Spectrum:
+    """Evaluate the sigmoid polynomial (values in [0, 1]) at each wavelength."""
+    x = dr.fma(dr.fma(coeffs[0], lam, coeffs[1]), lam, coeffs[2])
+    return dr.maximum(dr.fma(0.5 * x, dr.rsqrt(dr.fma(x, x, 1.0)), 0.5), 0.0)
+
+
+def rgb_unbounded(rgb: mi.Color3f) -> tuple[mi.Array3f, mi.Float]:
+    """(coefficients, scale) of the unbounded form: scale * S(l) reproduces ``rgb``."""
+    rgb = mi.Color3f(rgb)
+    m = dr.maximum(dr.maximum(rgb[0], rgb[1]), rgb[2])
+    scale = 2.0 * m
+    coeffs = rgb_to_coeffs(dr.select(scale > 0, rgb / dr.maximum(scale, 1e-30), 0.0))
+    return coeffs, scale
+
+
+# ------------------------------------------------------------------ named spectra
+
+_PLANCK_C = 2.99792458e8
+_PLANCK_H = 6.62607004e-34
+_PLANCK_K = 1.38064852e-23
+
+
+def blackbody(lam, temperature: float):
+    """Planck's law in W / (m^2 sr nm) (unnormalised, as Mitsuba's ``blackbody``)."""
+    l = lam * 1e-9
+    c0 = 2.0 * _PLANCK_H * _PLANCK_C ** 2
+    c1 = _PLANCK_H * _PLANCK_C / _PLANCK_K
+    if isinstance(l, np.ndarray):
+        return 1e-9 * c0 / (l ** 5 * (np.exp(c1 / (l * temperature)) - 1.0))
+    return 1e-9 * c0 / (l ** 5 * (dr.exp(c1 / (l * temperature)) - 1.0))
+
+
+def read_spd(path: str) -> tuple[np.ndarray, np.ndarray]:
+    """Read a two-column ``wavelength value`` file (``#`` comments allowed)."""
+    data = np.loadtxt(path, comments="#", ndmin=2)
+    if data.shape[1] != 2:
+        raise ValueError(f"{path}: expected two columns (wavelength value), got {data.shape[1]}")
+    return data[:, 0], data[:, 1]

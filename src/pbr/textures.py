@@ -1,0 +1,414 @@
+"""Spectral textures: constant spectra, ``checkerboard`` and ``bitmap``.
+
+Every texture of a scene lives in one :class:`TextureSet`. An instance is addressed by a
+*slot*; the set keeps one structure-of-arrays table per kind and a slot -> (kind, index)
+map, so a kernel evaluates any texture with a few gathers, and only the kinds a scene
+uses are traced into it.
+
+Constant spectra cover Mitsuba's ``rgb`` (albedo / unbounded / illuminant forms),
+``spectrum`` (a constant, ``wavelength:value`` pairs or a file), ``blackbody``, ``d65``
+and plain floats:  value(l) = scale * base(l) * (D65(l) if illuminant), where base is 1,
+a sigmoid polynomial, or a table resampled at 1 nm (piecewise linear, as Mitsuba's
+``regular``/``irregular`` spectra). Bitmap texels are upsampled per texel and the
+spectra of the 4 nearest texels are interpolated, as in Mitsuba's spectral variants.
+
+Parameters (``.value`` of constants, ``.data`` of bitmaps) are Dr.Jit arrays exposed to
+:func:`pbr.traverse`; tables are rebuilt from them, differentiably, on ``update()``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import drjit as dr
+import mitsuba as mi
+
+from . import spectrum as spec
+from .scene.props import Props, SceneError
+
+# Slot kinds.
+CONSTANT, CHECKERBOARD, BITMAP = 0, 1, 2
+# Base spectrum of a constant.
+BASE_ONE, BASE_SIGMOID, BASE_TABLE = 0, 1, 2
+
+_TAB_N = int(spec.LAMBDA_MAX - spec.LAMBDA_MIN) + 1  # 1 nm resolution
+
+
+class ConstantSpectrum:
+    """A spatially constant spectrum. ``form``: 'albedo', 'unbounded' or 'illuminant'."""
+
+    def __init__(self, base: int, form: str = "albedo", value=None, table=None, scale: float = 1.0):
+        self.base, self.form, self.table, self.scale = base, form, table, scale
+        self.params = {}
+        if value is not None:
+            self.params["value"] = value
+
+    def coeffs_scale(self):
+        """(sigmoid coefficients, scale), differentiable in the ``value`` parameter."""
+        v = self.params.get("value")
+        if self.base == BASE_SIGMOID:
+            if self.form == "albedo":
+                return spec.rgb_to_coeffs(v), mi.Float(self.scale)
+            c, s = spec.rgb_unbounded(v)
+            return c, s * self.scale
+        s = mi.Float(self.scale) if v is None else mi.Float(v) * self.scale
+        return mi.Array3f(0.0), s
+
+
+class Checkerboard:
+    def __init__(self, color0: int, color1: int, to_uv: np.ndarray):
+        self.color0, self.color1, self.to_uv = color0, color1, to_uv
+        self.params = {}
+
+
+class Bitmap:
+    def __init__(self, rgb: np.ndarray, filter_type: str, wrap_mode: str, to_uv: np.ndarray, form: str):
+        self.height, self.width = rgb.shape[:2]
+        self.filter_type, self.wrap_mode, self.to_uv, self.form = filter_type, wrap_mode, to_uv, form
+        self.params = {"data": mi.TensorXf(np.ascontiguousarray(rgb, dtype=np.float32))}
+
+
+class TextureSet:
+    """All textures of a scene and their Dr.Jit tables."""
+
+    def __init__(self):
+        self.items: list = []          # slot -> instance
+        self.constants: list[int] = []  # slots of each kind, in table order
+        self.checkers: list[int] = []
+        self.bitmaps: list[int] = []
+        self._cache: dict = {}
+
+    # -- building -------------------------------------------------------------------
+    def add(self, tex) -> int:
+        slot = len(self.items)
+        self.items.append(tex)
+        kind = {ConstantSpectrum: self.constants, Checkerboard: self.checkers, Bitmap: self.bitmaps}[type(tex)]
+        kind.append(slot)
+        return slot
+
+    def kind_of(self, slot: int) -> int:
+        t = type(self.items[slot])
+        return {ConstantSpectrum: CONSTANT, Checkerboard: CHECKERBOARD, Bitmap: BITMAP}[t]
+
+    def constant_value(self, slot: int) -> float:
+        """A rough scalar magnitude of a constant (for light power estimates)."""
+        t = self.items[slot]
+        if isinstance(t, ConstantSpectrum):
+            v = t.params.get("value")
+            if t.base == BASE_SIGMOID:
+                rgb = np.array(v, dtype=np.float64).reshape(-1)
+                return float(spec.luminance_rgb(np.maximum(rgb, 0))) * t.scale
+            if t.base == BASE_TABLE:
+                return float(np.mean(t.table)) * t.scale * (1.0 if v is None else float(np.asarray(v).reshape(-1)[0]))
+            return t.scale * (1.0 if v is None else float(np.asarray(v).reshape(-1)[0]))
+        if isinstance(t, Checkerboard):
+            return 0.5 * (self.constant_value(t.color0) + self.constant_value(t.color1))
+        return float(np.mean(spec.luminance_rgb(np.moveaxis(np.array(t.params["data"]), -1, 0)[:3])))
+
+    def build(self) -> None:
+        """(Re)build the Dr.Jit tables from the instances' current parameter values."""
+        n = len(self.items)
+        kinds = [self.kind_of(s) for s in range(n)]
+        index = [0] * n
+        for lst in (self.constants, self.checkers, self.bitmaps):
+            for i, s in enumerate(lst):
+                index[s] = i
+        T = {"slot_kind": mi.UInt32(kinds), "slot_index": mi.UInt32(index)}
+        # Constants.
+        consts = [self.items[s] for s in self.constants]
+        if consts:
+            nc = len(consts)
+            coeffs = dr.zeros(mi.Array3f, nc)
+            scale = dr.zeros(mi.Float, nc)
+            for i, c in enumerate(consts):
+                cf, sc = c.coeffs_scale()
+                dr.scatter(coeffs, cf, mi.UInt32(i))
+                dr.scatter(scale, sc, mi.UInt32(i))
+            T["c_coeffs"], T["c_scale"] = coeffs, scale
+            T["c_base"] = mi.UInt32([c.base for c in consts])
+            T["c_d65"] = mi.Bool([c.form == "illuminant" for c in consts])
+            tabs = [c for c in consts if c.base == BASE_TABLE]
+            offs, pool = [], []
+            for c in consts:
+                if c.base == BASE_TABLE:
+                    offs.append(len(pool) * _TAB_N)
+                    pool.append(np.asarray(c.table, dtype=np.float32))
+                else:
+                    offs.append(0)
+            T["c_tab_offset"] = mi.UInt32(offs)
+            if tabs:
+                T["c_tab"] = mi.Float(np.concatenate(pool))
+        # Checkerboards.
+        if self.checkers:
+            ch = [self.items[s] for s in self.checkers]
+            T["k_color0"] = mi.UInt32([index[c.color0] for c in ch])
+            T["k_color1"] = mi.UInt32([index[c.color1] for c in ch])
+            T["k_to_uv"] = [mi.Float([c.to_uv[r, k] for c in ch]) for r in range(2) for k in (0, 1, 3)]
+        # Bitmaps: per-texel sigmoid coefficients (+ scale for unbounded ones).
+        if self.bitmaps:
+            bm = [self.items[s] for s in self.bitmaps]
+            sizes = [b.width * b.height for b in bm]
+            offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.uint32)
+            total = int(sum(sizes))
+            coeffs = dr.zeros(mi.Array3f, total)
+            scales = dr.zeros(mi.Float, total)
+            for b, off in zip(bm, offsets):
+                data = b.params["data"]
+                ch = data.shape[2] if len(data.shape) == 3 else 1
+                flat = dr.ravel(data) if False else data.array
+                npx = b.width * b.height
+                idx = dr.arange(mi.UInt32, npx)
+                if ch >= 3:
+                    rgb = mi.Color3f(*[dr.gather(mi.Float, flat, idx * ch + k) for k in range(3)])
+                else:
+                    g = dr.gather(mi.Float, flat, idx * ch)
+                    rgb = mi.Color3f(g, g, g)
+                if b.form == "albedo":
+                    cf, sc = spec.rgb_to_coeffs(rgb), mi.Float(1.0) + dr.zeros(mi.Float, npx)
+                else:
+                    cf, sc = spec.rgb_unbounded(rgb)
+                dr.scatter(coeffs, cf, idx + int(off))
+                dr.scatter(scales, sc, idx + int(off))
+            T["b_coeffs"], T["b_scale"] = coeffs, scales
+            T["b_offset"] = mi.UInt32(offsets)
+            T["b_size"] = mi.Array2u([b.width for b in bm], [b.height for b in bm])
+            T["b_bilinear"] = mi.Bool([b.filter_type == "bilinear" for b in bm])
+            T["b_wrap"] = mi.UInt32([("repeat", "mirror", "clamp").index(b.wrap_mode) for b in bm])
+            T["b_d65"] = mi.Bool([b.form == "illuminant" for b in bm])
+            T["b_to_uv"] = [mi.Float([b.to_uv[r, k] for b in bm]) for r in range(2) for k in (0, 1, 3)]
+        dr.eval(T)
+        self.T = T
+        self.has_sigmoid = any(c.base == BASE_SIGMOID for c in consts)
+        self.has_table = any(c.base == BASE_TABLE for c in consts)
+        self.has_d65 = any(c.form == "illuminant" for c in consts) or any(
+            self.items[s].form == "illuminant" for s in self.bitmaps)
+
+    # -- evaluation (inside kernels) ---------------------------------------------------
+    @staticmethod
+    def _apply_uv(M, uv, i):
+        m = [dr.gather(mi.Float, a, i) for a in M]
+        return mi.Point2f(m[0] * uv[0] + m[1] * uv[1] + m[2], m[3] * uv[0] + m[4] * uv[1] + m[5])
+
+    def _eval_constant(self, ci, lam, active):
+        T = self.T
+        v = mi.Spectrum(1.0)
+        base = dr.gather(mi.UInt32, T["c_base"], ci, active)
+        if self.has_sigmoid:
+            c = dr.gather(mi.Array3f, T["c_coeffs"], ci, active)
+            v = dr.select(base == BASE_SIGMOID, spec.sigmoid_polynomial(c, lam), v)
+        if self.has_table:
+            off = dr.gather(mi.UInt32, T["c_tab_offset"], ci, active)
+            tab = mi.Spectrum([self._lerp_1nm(T["c_tab"], off, lam[k], active & (base == BASE_TABLE))
+                               for k in range(spec.N_WAVELENGTHS)])
+            v = dr.select(base == BASE_TABLE, tab, v)
+        if self.has_d65 and self.constants:
+            v = dr.select(dr.gather(mi.Bool, T["c_d65"], ci, active), v * spec.d65(lam), v)
+        return v * dr.gather(mi.Float, T["c_scale"], ci, active)
+
+    @staticmethod
+    def _lerp_1nm(table, off, l, active):
+        t = dr.clip(l - spec.LAMBDA_MIN, 0.0, _TAB_N - 1.0)
+        i0 = dr.minimum(mi.UInt32(t), _TAB_N - 2)
+        w = t - mi.Float(i0)
+        a = dr.gather(mi.Float, table, off + i0, active)
+        b = dr.gather(mi.Float, table, off + i0 + 1, active)
+        return dr.fma(w, b - a, a)
+
+    def _eval_bitmap(self, bi, uv, lam, active):
+        T = self.T
+        size = dr.gather(mi.Array2u, T["b_size"], bi, active)
+        off = dr.gather(mi.UInt32, T["b_offset"], bi, active)
+        wrap = dr.gather(mi.UInt32, T["b_wrap"], bi, active)
+        bil = dr.gather(mi.Bool, T["b_bilinear"], bi, active)
+        uv = self._apply_uv(T["b_to_uv"], uv, bi)
+        res = mi.Vector2f(size)
+        p = uv * res - dr.select(bil, 0.5, 0.0)
+        p0 = dr.floor(p)
+        w1 = dr.select(bil, p - p0, 0.0)
+        ip = mi.Vector2i(p0)
+
+        def texel(dx, dy):
+            q = mi.Vector2i(ip.x + dx, ip.y + dy)
+            q = _wrap(q, mi.Vector2i(size), wrap)
+            k = off + mi.UInt32(q.y) * size.x + mi.UInt32(q.x)
+            c = dr.gather(mi.Array3f, T["b_coeffs"], k, active)
+            s = dr.gather(mi.Float, T["b_scale"], k, active)
+            return spec.sigmoid_polynomial(c, lam) * s
+
+        v = texel(0, 0)
+        if any(self.items[s].filter_type == "bilinear" for s in self.bitmaps):
+            v10, v01, v11 = texel(1, 0), texel(0, 1), texel(1, 1)
+            v0 = dr.fma(w1.x, v10 - v, v)
+            v1 = dr.fma(w1.x, v11 - v01, v01)
+            v = dr.select(bil, dr.fma(w1.y, v1 - v0, v0), v)
+        if self.has_d65:
+            v = dr.select(dr.gather(mi.Bool, T["b_d65"], bi, active), v * spec.d65(lam), v)
+        return v
+
+    def eval(self, slot, uv, lam: mi.Spectrum, active=True) -> mi.Spectrum:
+        """Spectrum of texture ``slot`` at surface coordinates ``uv``."""
+        T = self.T
+        slot = mi.UInt32(slot)
+        if len(self.items) == 1 or not (self.checkers or self.bitmaps):
+            kind = mi.UInt32(self.kind_of(0)) if len(self.items) == 1 else mi.UInt32(CONSTANT)
+        else:
+            kind = dr.gather(mi.UInt32, T["slot_kind"], slot, active)
+        idx = dr.gather(mi.UInt32, T["slot_index"], slot, active)
+        result = mi.Spectrum(0.0)
+        if self.constants:
+            ci = idx
+            if self.checkers:
+                is_ck = active & (kind == CHECKERBOARD)
+                st = self._apply_uv(T["k_to_uv"], uv, idx)
+                frac = st - dr.floor(st)
+                same = (frac.x > 0.5) == (frac.y > 0.5)
+                c0 = dr.gather(mi.UInt32, T["k_color0"], idx, is_ck)
+                c1 = dr.gather(mi.UInt32, T["k_color1"], idx, is_ck)
+                ci = dr.select(is_ck, dr.select(same, c0, c1), idx)
+            result = self._eval_constant(ci, lam, active & (kind != BITMAP))
+        if self.bitmaps:
+            is_bm = active & (kind == BITMAP)
+            result = dr.select(is_bm, self._eval_bitmap(idx, uv, lam, is_bm), result)
+        return result
+
+
+def _wrap(q: mi.Vector2i, size: mi.Vector2i, mode: mi.UInt32) -> mi.Vector2i:
+    """Texel wrap modes: 0 repeat, 1 mirror, 2 clamp."""
+    rep = q - size * mi.Vector2i(dr.floor(mi.Vector2f(q) / mi.Vector2f(size)))
+    per = q - 2 * size * mi.Vector2i(dr.floor(mi.Vector2f(q) / mi.Vector2f(2 * size)))
+    mir = dr.select(per >= size, 2 * size - 1 - per, per)
+    clp = dr.clip(q, 0, size - 1)
+    return dr.select(mode == 0, rep, dr.select(mode == 1, mir, clp))
+
+
+# ------------------------------------------------------------------------ loading
+
+def _table_from_pairs(wl: np.ndarray, vals: np.ndarray, where: str) -> np.ndarray:
+    wl = np.asarray(wl, np.float64)
+    vals = np.asarray(vals, np.float64)
+    if wl.size < 2 or np.any(np.diff(wl) <= 0):
+        raise SceneError(f"{where}: wavelengths must be at least two strictly increasing values")
+    grid = spec.LAMBDA_MIN + np.arange(_TAB_N)
+    # Zero outside the given range, as Mitsuba's irregular/regular spectra.
+    return np.where((grid >= wl[0]) & (grid <= wl[-1]), np.interp(grid, wl, vals), 0.0)
+
+
+def load_spectrum(loader, value, path: str, emitter: bool, unbounded: bool = False) -> int:
+    """Turn a Mitsuba spectrum-valued parameter into a texture slot (see ``_load``); the
+    texture remembers its key path for :func:`pbr.traverse` (``red.reflectance``)."""
+    slot = _load(loader, value, path, emitter, unbounded)
+    tex = loader.textures.items[slot]
+    if not hasattr(tex, "path"):
+        tex.path = path.split(".", 1)[1] if path.startswith("scene.") else path
+    return slot
+
+
+def _load(loader, value, path: str, emitter: bool, unbounded: bool = False) -> int:
+    """Turn a Mitsuba spectrum-valued parameter into a texture slot.
+
+    ``value`` is a float, a dict ``{'type': 'rgb'|'spectrum'|'blackbody'|'d65'|
+    'checkerboard'|'bitmap'|'ref', ...}`` as in Mitsuba dicts. Emitters use the
+    illuminant (D65) form for RGB and floats, as Mitsuba's spectral variants do."""
+    texs: TextureSet = loader.textures
+    form_rgb = "illuminant" if emitter else ("unbounded" if unbounded else "albedo")
+    if isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool):
+        v = float(value)
+        if emitter:
+            return texs.add(ConstantSpectrum(BASE_SIGMOID, "illuminant", mi.Color3f(v)))
+        return texs.add(ConstantSpectrum(BASE_ONE, value=mi.Float(v)))
+    if not isinstance(value, dict) or "type" not in value:
+        raise SceneError(f"{path}: expected a float or a texture/spectrum dict with a 'type', got {value!r}")
+    p = Props(value, path, loader)
+    t = p.type
+    if t == "ref":
+        obj = loader.resolve_ref(p.string("id"), path)
+        p.finish()
+        return _load(loader, obj, path, emitter, unbounded)
+    if t == "rgb":
+        rgb = p.vector3("value")
+        if form_rgb == "albedo" and (np.any(rgb < 0) or np.any(rgb > 1)):
+            raise p.error("value", f"RGB reflectance must lie in [0, 1], got {rgb.tolist()}")
+        p.finish()
+        return texs.add(ConstantSpectrum(BASE_SIGMOID, form_rgb, mi.Color3f(*map(float, rgb))))
+    if t == "spectrum":
+        if p.has("filename"):
+            wl, vals = spec.read_spd(loader.resolve_path(p.string("filename"), p.key("filename")))
+            p.finish()
+            return texs.add(ConstantSpectrum(BASE_TABLE, table=_table_from_pairs(wl, vals, path)))
+        v = p.raw("value")
+        p.finish()
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            return texs.add(ConstantSpectrum(BASE_ONE, value=mi.Float(float(v))))
+        if isinstance(v, str):
+            try:
+                pairs = [tuple(float(x) for x in item.split(":")) for item in v.replace(",", " ").split()]
+            except ValueError:
+                raise SceneError(f"{path}.value: expected 'wavelength:value' pairs, got {v!r}") from None
+            v = pairs
+        try:
+            arr = np.asarray(v, dtype=np.float64)
+        except (TypeError, ValueError):
+            arr = np.empty(0)
+        if arr.ndim != 2 or arr.shape[1] != 2:
+            raise SceneError(f"{path}.value: expected a float or a list of (wavelength, value) pairs, got {v!r}")
+        return texs.add(ConstantSpectrum(BASE_TABLE, table=_table_from_pairs(arr[:, 0], arr[:, 1], path)))
+    if t == "blackbody":
+        temp = p.float("temperature", min=1.0)
+        lo = p.float("wavelength_min", spec.LAMBDA_MIN)
+        hi = p.float("wavelength_max", spec.LAMBDA_MAX)
+        p.finish()
+        grid = spec.LAMBDA_MIN + np.arange(_TAB_N)
+        table = np.where((grid >= lo) & (grid <= hi), spec.blackbody(grid, temp), 0.0)
+        return texs.add(ConstantSpectrum(BASE_TABLE, table=table))
+    if t == "d65":
+        scale = p.float("scale", 1.0)
+        if p.has("color"):
+            rgb = p.vector3("color")
+            p.finish()
+            return texs.add(ConstantSpectrum(BASE_SIGMOID, "illuminant", mi.Color3f(*map(float, rgb)), scale=scale))
+        p.finish()
+        return texs.add(ConstantSpectrum(BASE_ONE, "illuminant", scale=scale))
+    if t == "uniform":
+        v = p.float("value")
+        p.finish()
+        return texs.add(ConstantSpectrum(BASE_ONE, value=mi.Float(v)))
+    if t == "checkerboard":
+        c0 = load_spectrum(loader, p.raw("color0", 0.4), p.key("color0"), emitter, unbounded)
+        c1 = load_spectrum(loader, p.raw("color1", 0.2), p.key("color1"), emitter, unbounded)
+        for c, k in ((c0, "color0"), (c1, "color1")):
+            if texs.kind_of(c) != CONSTANT:
+                raise p.error(k, "checkerboard colours must be constant spectra (rgb, spectrum or float)")
+        to_uv = p.transform("to_uv")
+        p.finish()
+        slot = texs.add(Checkerboard(c0, c1, to_uv))
+        texs.items[slot].children = {"color0": c0, "color1": c1}
+        return slot
+    if t == "bitmap":
+        from .image import read_image, srgb_to_linear
+        filter_type = p.string("filter_type", "bilinear", choices=("bilinear", "nearest"))
+        wrap_mode = p.string("wrap_mode", "repeat", choices=("repeat", "mirror", "clamp"))
+        raw = p.bool("raw", False)
+        to_uv = p.transform("to_uv")
+        p.mark("format")
+        if p.has("data"):
+            rgb = np.asarray(p.raw("data"), dtype=np.float32)
+            if rgb.ndim == 2:
+                rgb = rgb[..., None]
+            if rgb.ndim != 3:
+                raise p.error("data", f"expected an (H, W, C) array, got shape {rgb.shape}")
+        else:
+            fname = loader.resolve_path(p.string("filename"), p.key("filename"))
+            try:
+                rgb = read_image(fname, linearize=not raw)
+            except TypeError:
+                rgb = read_image(fname)
+            except Exception as e:  # unreadable file
+                raise p.error("filename", f"cannot read image {fname!r}: {e}") from None
+        p.finish()
+        if rgb.ndim == 2:
+            rgb = rgb[..., None]
+        rgb = rgb[..., :3] if rgb.shape[2] >= 3 else rgb[..., :1]
+        if form_rgb == "albedo":
+            rgb = np.clip(rgb, 0.0, 1.0)
+        return texs.add(Bitmap(rgb, filter_type, wrap_mode, to_uv, form_rgb))
+    raise SceneError(f"{path}: unsupported texture/spectrum type {t!r} (supported: rgb, spectrum, blackbody, "
+                     "d65, uniform, checkerboard, bitmap, ref)")

@@ -1,0 +1,180 @@
+"""CLI: argument parsing, outputs, summary line and error handling, with a fake pbr API."""
+import os
+import subprocess
+import sys
+
+import pbr
+import numpy as np
+import pytest
+
+from pbr import cli
+from pbr.image import read_image
+
+H, W = 4, 6
+
+
+class FakeScene:
+    def __init__(self, spp=None):
+        if spp is not None:
+            self.spp = spp
+
+
+@pytest.fixture
+def fake(monkeypatch, tmp_path):
+    """Replace pbr's public API with recorders; run in tmp_path."""
+    calls = {}
+    img = np.linspace(0, 1, H * W * 3, dtype=np.float32).reshape(H, W, 3)
+
+    def set_backend(name):
+        calls["backend"] = name
+
+    def cornell_box():
+        return {"type": "scene", "marker": "cornell"}
+
+    def load_dict(d):
+        calls["load_dict"] = d
+        return FakeScene(spp=32)
+
+    def load_file(path, **kw):
+        calls["load_file"] = (path, kw)
+        return FakeScene(spp=kw.get("spp"))
+
+    def render(scene, spp=0, seed=0):
+        calls["render"] = dict(spp=spp, seed=seed)
+        return img
+
+    for name, f in dict(set_backend=set_backend, cornell_box=cornell_box, load_dict=load_dict,
+                        load_file=load_file, render=render).items():
+        monkeypatch.setattr(pbr, name, f, raising=False)
+    monkeypatch.chdir(tmp_path)
+    calls["img"] = img
+    return calls
+
+
+def test_builtin_cornell_defaults(fake, tmp_path, capsys):
+    assert cli.main(["render", "--spp", "16", "--seed", "3", "--png", "pics/c.png"]) == 0
+    assert fake["backend"] == "auto"
+    assert fake["load_dict"]["marker"] == "cornell"
+    assert fake["render"] == dict(spp=16, seed=3)
+    np.testing.assert_array_equal(read_image(tmp_path / "out" / "cornell.exr"), fake["img"])
+    assert (tmp_path / "pics" / "c.png").is_file()
+    out = capsys.readouterr().out.strip()
+    assert out.startswith(f"rendered cornell: {W}x{H}, 16 spp, ")
+    assert out.endswith(f"-> {os.path.join('out', 'cornell.exr')}, pics/c.png")
+    assert "Msamples/s" in out and " s, " in out
+    assert len(out.splitlines()) == 1
+
+
+def test_scene_default_spp_from_scene_object(fake, capsys):
+    assert cli.main(["render", "--backend", "llvm", "-o", "x.exr"]) == 0
+    assert fake["backend"] == "llvm"
+    assert fake["render"]["spp"] == 0  # 0 means "scene default"
+    assert ", 32 spp, " in capsys.readouterr().out
+
+
+def test_unknown_spp_prints_question_mark(fake, tmp_path, capsys):
+    scene = tmp_path / "box.xml"
+    scene.write_text("<scene version='3.0.0'/>")
+    assert cli.main(["render", str(scene)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"rendered box: {W}x{H}, ? spp, ") and "? Msamples/s" in out
+    assert (tmp_path / "out" / "box.exr").is_file()
+
+
+def test_defines_reach_load_file_typed(fake, tmp_path, capsys):
+    scene = tmp_path / "s.xml"
+    scene.write_text("<scene version='3.0.0'/>")
+    rc = cli.main(["render", str(scene), "-D", "spp=16", "-D", "scale=0.5",
+                   "-D", "name=glass", "-D", "expr=a=b", "-o", "r.exr"])
+    assert rc == 0
+    path, kw = fake["load_file"]
+    assert path == str(scene)
+    assert kw == {"spp": 16, "scale": 0.5, "name": "glass", "expr": "a=b"}
+    assert type(kw["spp"]) is int and type(kw["scale"]) is float
+    assert ", 16 spp, " in capsys.readouterr().out
+
+
+def test_png_only_output_with_tonemap(fake, tmp_path, capsys):
+    assert cli.main(["render", "-o", "img.png", "--tonemap", "reinhard"]) == 0
+    assert (tmp_path / "img.png").is_file()
+    assert not (tmp_path / "out").exists()
+    assert capsys.readouterr().out.strip().endswith("-> img.png")
+
+
+def test_missing_scene_file(fake, capsys):
+    assert cli.main(["render", "no/such/scene.xml"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pbr: error: ") and "no/such/scene.xml" in err
+    assert "Traceback" not in err
+    assert "render" not in fake and "load_file" not in fake
+
+
+@pytest.mark.parametrize("exc", [ValueError("scene.shapes.foo: unknown parameter 'bar'"),
+                                 FileNotFoundError("mesh.obj not found")])
+def test_load_errors_are_reported(fake, monkeypatch, tmp_path, capsys, exc):
+    scene = tmp_path / "s.xml"
+    scene.write_text("<scene/>")
+
+    def load_file(path, **kw):
+        raise exc
+
+    monkeypatch.setattr(pbr, "load_file", load_file, raising=False)
+    assert cli.main(["render", str(scene)]) == 2
+    err = capsys.readouterr().err
+    assert err == f"pbr: error: {exc}\n"
+
+
+def test_backend_error(fake, monkeypatch, capsys):
+    def set_backend(name):
+        raise pbr.BackendError(f"backend {name!r} unavailable: no CUDA device")
+
+    monkeypatch.setattr(pbr, "set_backend", set_backend, raising=False)
+    assert cli.main(["render", "--backend", "cuda"]) == 2
+    err = capsys.readouterr().err
+    assert err == "pbr: error: backend 'cuda' unavailable: no CUDA device\n"
+
+
+def test_bad_output_extension_fails_before_render(fake, capsys):
+    assert cli.main(["render", "-o", "out.jpg"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("pbr: error: ") and "out.jpg" in err and ".exr" in err
+    assert "render" not in fake
+
+
+def test_nonfinite_image_is_an_error(fake, monkeypatch, capsys):
+    bad = np.zeros((2, 2, 3), np.float32)
+    bad[0, 0, 0] = np.nan
+    monkeypatch.setattr(pbr, "render", lambda scene, spp=0, seed=0: bad, raising=False)
+    assert cli.main(["render"]) == 2
+    assert "1 non-finite" in capsys.readouterr().err
+
+
+def test_render_bugs_keep_their_traceback(fake, monkeypatch):
+    def render(scene, spp=0, seed=0):
+        raise ValueError("internal bug")
+
+    monkeypatch.setattr(pbr, "render", render, raising=False)
+    with pytest.raises(ValueError, match="internal bug"):
+        cli.main(["render"])
+
+
+def test_usage_errors(fake, capsys):
+    assert cli.main([]) == 2
+    assert cli.main(["render", "-D", "novalue"]) == 2
+    assert "name=value" in capsys.readouterr().err
+    assert cli.main(["render", "--backend", "metal"]) == 2
+    assert cli.main(["render", "--tonemap", "aces"]) == 2
+    assert cli.main(["render", "--spp", "-1"]) == 2
+    assert cli.main(["render", "-D", "spp=4"]) == 2  # -D needs a scene file
+    assert "-D" in capsys.readouterr().err
+    assert cli.main(["render", "--help"]) == 0
+    assert "render" not in fake
+
+
+def test_python_dash_m_entry(tmp_path):
+    """``python -m pbr`` runs the CLI (a usage error here, so no rendering is needed)."""
+    r = subprocess.run([sys.executable, "-m", "pbr", "render", str(tmp_path / "none.xml")],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2
+    assert r.stderr.startswith("pbr: error: scene file not found")
+    assert "Traceback" not in r.stderr
