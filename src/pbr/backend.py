@@ -131,3 +131,13 @@ def ensure() -> None:
             get_backend()
         else:
             mi.set_variant(variant())
+
+
+class VariantStruct(type):
+    """Metaclass for Dr.Jit structs whose field types are Mitsuba variant types:
+    ``DRJIT_STRUCT`` is resolved from ``_fields`` (type names) for the active variant, so
+    the classes work whichever backend is selected, and can be imported before one is."""
+
+    @property
+    def DRJIT_STRUCT(cls):
+        return {k: getattr(mi, v) for k, v in cls._fields.items()}

@@ -128,10 +128,10 @@ def d65(lam: mi.Spectrum) -> mi.Spectrum:
 
 # ------------------------------------------------------------------ wavelengths
 
-class SampledWavelengths:
+class SampledWavelengths(metaclass=backend.VariantStruct):
     """Four wavelengths (nm) and their sampling densities (1/nm), as in pbrt-v4."""
 
-    DRJIT_STRUCT = {"lambda_": mi.Spectrum, "pdf": mi.Spectrum}
+    _fields = {"lambda_": "Spectrum", "pdf": "Spectrum"}
 
     def __init__(self, lambda_=None, pdf=None):
         self.lambda_ = lambda_ if lambda_ is not None else mi.Spectrum(0)
@@ -166,6 +166,19 @@ def to_xyz(L: mi.Spectrum, wl: SampledWavelengths) -> mi.Array3f:
     inv = dr.select(wl.pdf != 0, dr.rcp(wl.pdf), 0.0) * (1.0 / (N_WAVELENGTHS * CIE_Y_INTEGRAL))
     Lw = L * inv
     return mi.Array3f(dr.sum(x * Lw), dr.sum(y * Lw), dr.sum(z * Lw))
+
+
+def to_xyz_adjoint(g_xyz: mi.Array3f, wl: SampledWavelengths) -> mi.Spectrum:
+    """Transpose of :func:`to_xyz`: the adjoint radiance for an XYZ adjoint ``g_xyz``."""
+    x, y, z = cie_xyz(wl.lambda_)
+    inv = dr.select(wl.pdf != 0, dr.rcp(wl.pdf), 0.0) * (1.0 / (N_WAVELENGTHS * CIE_Y_INTEGRAL))
+    return (g_xyz[0] * x + g_xyz[1] * y + g_xyz[2] * z) * inv
+
+
+def srgb_to_xyz_adjoint(g_rgb: mi.Array3f) -> mi.Array3f:
+    """Transpose of :func:`xyz_to_srgb` (maps an sRGB adjoint to an XYZ adjoint)."""
+    m = XYZ_TO_SRGB
+    return mi.Array3f(*[m[0, c] * g_rgb[0] + m[1, c] * g_rgb[1] + m[2, c] * g_rgb[2] for c in range(3)])
 
 
 def xyz_to_srgb(xyz):

@@ -14,16 +14,17 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from ..backend import VariantStruct
+
 # Lobe flags (Python ints: a kernel only contains code for flags a scene has).
 REFLECTION, TRANSMISSION, DIFFUSE, GLOSSY, SPECULAR = 1, 2, 4, 8, 16
 
 
-class BSDFSample:
+class BSDFSample(metaclass=VariantStruct):
     """A sampled direction: ``wo`` (local), its solid-angle ``pdf``, the relative IOR
     ``eta`` crossed, whether the lobe was a Dirac delta, and ``weight`` = f cos / pdf."""
 
-    DRJIT_STRUCT = {"wo": mi.Vector3f, "pdf": mi.Float, "eta": mi.Float,
-                    "delta": mi.Bool, "weight": mi.Spectrum}
+    _fields = {"wo": "Vector3f", "pdf": "Float", "eta": "Float", "delta": "Bool", "weight": "Spectrum"}
 
     def __init__(self, wo=None, pdf=None, eta=None, delta=None, weight=None):
         self.wo = wo if wo is not None else mi.Vector3f(0)

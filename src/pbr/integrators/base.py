@@ -90,15 +90,11 @@ class SamplingIntegrator:
         return mi.TensorXf(rgb.astype(np.float32).reshape(h, w, 3))
 
     def _develop_adjoint(self, wl, weight, pixel_w, grad_img_flat, pixel, active):
-        """Per-sample adjoint radiance dLoss/dL for a film adjoint ``grad_img``."""
-        with dr.resume_grad():
-            L = dr.zeros(mi.Spectrum, dr.width(weight))
-            dr.enable_grad(L)
-            norm = weight * dr.rcp(dr.gather(mi.Float, pixel_w, pixel, active))
-            rgb = spec.xyz_to_srgb(spec.to_xyz(L, wl) * norm)
-            g = mi.Array3f([dr.gather(mi.Float, grad_img_flat, pixel * 3 + k, active) for k in range(3)])
-            dr.backward_from(rgb * g)
-            return dr.grad(L)
+        """Per-sample adjoint radiance dLoss/dL for a film adjoint ``grad_img`` (the film
+        is linear in L: pixel = M_xyz2srgb * sum(w XYZ(L)) / sum(w))."""
+        norm = weight * dr.rcp(dr.gather(mi.Float, pixel_w, pixel, active))
+        g = mi.Array3f([dr.gather(mi.Float, grad_img_flat, pixel * 3 + k, active) for k in range(3)])
+        return spec.to_xyz_adjoint(spec.srgb_to_xyz_adjoint(g) * norm, wl)
 
     def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0):
         """Propagate the image adjoint ``grad_img`` (H, W, 3) to the scene parameters."""
@@ -109,12 +105,12 @@ class SamplingIntegrator:
             with dr.suspend_grad():
                 rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
                 pixel = dr.arange(mi.UInt32, w * h * per_pass) // per_pass
-                state = rng.state, rng.inc
+                state = _snapshot(rng)
                 L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
                 dL = self._develop_adjoint(wl, weight, pixel_w, g, pixel, inside)
                 dL = dr.select(dr.isfinite(dL), dL, 0.0)
                 dr.eval(L, dL)
-                rng.state, rng.inc = state
+                rng.state, rng.inc = _snapshot(state)
                 self.sample(scene, rng, ray, wl, BACKWARD, dL, L, inside)
             dr.eval()
 
@@ -126,10 +122,10 @@ class SamplingIntegrator:
         for p in range(n_pass):
             with dr.suspend_grad():
                 rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
-                state = rng.state, rng.inc
+                state = _snapshot(rng)
                 L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
                 dr.eval(L)
-                rng.state, rng.inc = state
+                rng.state, rng.inc = _snapshot(state)
                 dL, _ = self.sample(scene, rng, ray, wl, FORWARD, None, L, inside)
                 xyz = spec.to_xyz(dL, wl) * weight
                 xyz = dr.select(dr.isfinite(xyz), xyz, 0.0)
@@ -149,6 +145,13 @@ class SamplingIntegrator:
                 dr.eval(weight)
                 sum_w += np.array(dr.block_sum(weight, per_pass))
         return np.maximum(sum_w, 1e-30)
+
+
+def _snapshot(rng):
+    """Copies of a PCG32's (state, inc): symbolic loops update the arrays in place, so
+    replaying a path needs real copies, not references."""
+    st, inc = (rng.state, rng.inc) if hasattr(rng, "state") else rng
+    return type(st)(st), type(inc)(inc)
 
 
 def _progress(n_pass, progress):

@@ -106,7 +106,7 @@ class PathIntegrator(SamplingIntegrator):
                     if mode == BACKWARD:
                         dr.backward_from(dL * Lo)
                     else:
-                        dL_fwd += dr.forward_to(Lo)
+                        dL_fwd += mi.Spectrum(dr.forward_to(Lo))
 
             beta *= bs.weight
             eta *= bs.eta

@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import mitsuba as mi
 
+from ..backend import VariantStruct
 
-class LightSample:
-    DRJIT_STRUCT = {"L": mi.Spectrum, "wi": mi.Vector3f, "pdf": mi.Float, "p": mi.Point3f}
+
+class LightSample(metaclass=VariantStruct):
+    _fields = {"L": "Spectrum", "wi": "Vector3f", "pdf": "Float", "p": "Point3f"}
 
     def __init__(self, L=None, wi=None, pdf=None, p=None):
         self.L = L if L is not None else mi.Spectrum(0)
