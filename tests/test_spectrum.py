@@ -1,0 +1,64 @@
+import numpy as np
+import drjit as dr
+import mitsuba as mi
+
+from pbr import spectrum as S
+
+
+def test_rgb_coefficients_match_mitsuba_table():
+    rng = np.random.default_rng(1)
+    cols = np.concatenate([rng.random((200, 3)), [[0, 0, 0], [1, 1, 1], [0.3, 0.3, 0.3], [0, 0, 0.2], [1, 0, 0]]])
+    c = np.array(S.rgb_to_coeffs(mi.Color3f(cols.T.astype(np.float32)))).T
+    ref = np.array([np.array(mi.srgb_model_fetch(mi.ScalarColor3f(x))) for x in cols])
+    # Mitsuba clamps greys at +-8192, like pbr: compare the evaluated spectra instead of raw c2.
+    lam = mi.Spectrum(400, 500, 600, 700)
+    a = np.array(S.sigmoid_polynomial(mi.Array3f(c.T), lam))
+    b = np.array(S.sigmoid_polynomial(mi.Array3f(ref.T.astype(np.float32)), lam))
+    assert np.abs(a - b).max() < 1e-5
+
+
+def test_upsampled_rgb_roundtrips_through_xyz():
+    """The spectrum of an rgb albedo under D65 integrates back to that rgb."""
+    lam = np.linspace(360, 830, 4701)
+    xyz, d65 = S.cie_tables_np()
+    grid = np.arange(95) * 5.0 + 360
+    cmf = np.stack([np.interp(lam, grid, xyz[:, k]) for k in range(3)], 1)
+    illum = np.interp(lam, grid, d65)
+    for rgb in ([0.57, 0.043, 0.044], [0.1, 0.8, 0.3], [0.5, 0.5, 0.5]):
+        c = S.rgb_to_coeffs(mi.Color3f(*rgb))
+        L = mi.Float(lam.astype(np.float32))
+        spec = np.array(S.sigmoid_polynomial(mi.Array3f(*[dr.gather(mi.Float, c[k], dr.zeros(mi.UInt32, len(lam)))
+                                                          for k in range(3)]), mi.Spectrum(L, L, L, L)))[0]
+        XYZ = (cmf * (spec * illum)[:, None]).sum(0) * (lam[1] - lam[0]) / S.CIE_Y_INTEGRAL
+        out = S.XYZ_TO_SRGB @ XYZ
+        assert np.allclose(out, rgb, atol=0.01), (rgb, out)
+
+
+def test_d65_has_unit_luminance():
+    xyz, d65 = S.cie_tables_np()
+    Y = np.trapezoid(d65 * xyz[:, 1], dx=5.0) / S.CIE_Y_INTEGRAL
+    assert abs(Y - 1) < 1e-6
+
+
+def test_visible_wavelength_pdf_is_normalised_and_consistent():
+    u = dr.linspace(mi.Float, 0, 1, 100001, endpoint=False) + 0.5 / 100001
+    wl = S.SampledWavelengths.sample_visible(u)
+    lam = np.array(wl.lambda_)[0]
+    pdf = np.array(wl.pdf)[0]
+    assert lam.min() >= 359.9 and lam.max() <= 830.1
+    # Histogram of samples vs the density.
+    hist, edges = np.histogram(lam, bins=47, range=(360, 830), density=True)
+    mid = 0.5 * (edges[1:] + edges[:-1])
+    dens = np.interp(mid, np.sort(lam), pdf[np.argsort(lam)])
+    assert np.allclose(hist, dens, rtol=0.02)
+    order = np.argsort(lam)
+    assert abs(np.trapezoid(pdf[order], lam[order]) - 1) < 1e-3
+
+
+def test_to_xyz_of_unit_spectrum():
+    u = dr.linspace(mi.Float, 0, 1, 65536, endpoint=False)
+    wl = S.SampledWavelengths.sample_visible(u)
+    xyz = np.array(S.to_xyz(mi.Spectrum(1.0), wl)).mean(axis=1)
+    xyz_t, _ = S.cie_tables_np()
+    expect = np.trapezoid(xyz_t, dx=5.0, axis=0) / S.CIE_Y_INTEGRAL
+    assert np.allclose(xyz, expect, rtol=2e-3)
