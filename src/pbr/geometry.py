@@ -62,7 +62,7 @@ def load_mesh_file(props: Props, path: str) -> "mi.Mesh":
             uv[:, 1] = 1.0 - uv[:, 1]
     vw = v @ to_world[:3, :3].T + to_world[:3, 3]
     m = mi.Mesh(os.path.basename(path), len(vw), len(f),
-                has_vertex_normals=n is not None, has_vertex_texcoords=uv is not None)
+                has_vertex_normals=not face_normals, has_vertex_texcoords=uv is not None)
     params = mi.traverse(m)
     params["vertex_positions"] = mi.Float(vw.astype(np.float32).ravel())
     params["faces"] = mi.UInt32(f.ravel())

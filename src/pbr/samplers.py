@@ -22,7 +22,11 @@ class IndependentSampler:
     @staticmethod
     def make_rng(sample_index: mi.UInt32, seed: mi.UInt32) -> mi.PCG32:
         v0, v1 = mi.sample_tea_32(sample_index, seed, 4)
-        return mi.PCG32(dr.width(sample_index), v0, v1)
+        rng = mi.PCG32(dr.width(sample_index))
+        # seed() (unlike the constructor) adds no per-lane offset: a sample's stream
+        # depends only on (seed, sample index), not on how samples are split into passes.
+        rng.seed(mi.UInt64(v0), mi.UInt64(v1))
+        return rng
 
 
 SAMPLERS = {"independent": IndependentSampler}

@@ -95,7 +95,7 @@ def estimate(render_fn: Callable, spp: int, batches: int = 16, seed: int = 0) ->
             raise ValueError(f"estimate: render {i} has shape {x.shape}, expected {mean.shape}")
         d = x - mean
         mean += d / (i + 1)
-        m2 += d * d
+        m2 += d * (x - mean)
         img_means[i] = x.mean()
     var = m2 / (batches - 1) / batches
     return Estimate(mean, var, img_means.var(ddof=1) / batches, batches, spp_b)

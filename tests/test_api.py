@@ -1,0 +1,89 @@
+import numpy as np
+import pytest
+import mitsuba as mi
+
+import pbr
+
+
+def test_render_returns_float32_rgb_image():
+    scene = pbr.load_dict(pbr.cornell_box(16, 4))
+    img = pbr.render(scene)
+    a = np.asarray(img)
+    assert a.shape == (16, 16, 3) and a.dtype == np.float32
+    assert np.all(np.isfinite(a)) and a.mean() > 0.05
+    assert scene.spp == 4
+
+
+def test_same_seed_same_image_different_seed_differs():
+    scene = pbr.load_dict(pbr.cornell_box(16, 4))
+    a = np.asarray(pbr.render(scene, seed=3))
+    b = np.asarray(pbr.render(scene, seed=3))
+    c = np.asarray(pbr.render(scene, seed=4))
+    assert np.array_equal(a, b)
+    assert not np.array_equal(a, c)
+
+
+def test_multipass_equals_single_pass(monkeypatch):
+    from pbr.integrators import base
+    scene = pbr.load_dict(pbr.cornell_box(8, 16))
+    a = np.asarray(pbr.render(scene, seed=1))
+    monkeypatch.setattr(base, "MAX_SAMPLES_PER_PASS", 8 * 8 * 4)
+    b = np.asarray(pbr.render(scene, seed=1, progress=False))
+    assert np.allclose(a, b, rtol=1e-4, atol=1e-6)
+
+
+def test_traverse_keys_follow_mitsuba():
+    scene = pbr.load_dict(pbr.cornell_box(8, 4))
+    params = pbr.traverse(scene)
+    assert {"red.reflectance.value", "green.reflectance.value", "white.reflectance.value",
+            "light.emitter.radiance.value"} <= set(params.keys())
+    mkeys = set(mi.traverse(mi.load_dict(mi.cornell_box())).keys())
+    assert "red.reflectance.value" in mkeys
+    old = np.asarray(pbr.render(scene, seed=0)).mean()
+    params["light.emitter.radiance.value"] = mi.Color3f(params["light.emitter.radiance.value"]) * 2
+    params.update()
+    assert np.asarray(pbr.render(scene, seed=0)).mean() == pytest.approx(2 * old, rel=1e-3)
+
+
+@pytest.mark.parametrize("mutate, where", [
+    (lambda d: d["red"]["reflectance"].__setitem__("valeu", 1), "scene.red.reflectance.valeu"),
+    (lambda d: d.__setitem__("x", {"type": "nonsense"}), "scene.x"),
+    (lambda d: d["floor"].__setitem__("bsdf", {"type": "ref", "id": "nope"}), "scene.floor.bsdf"),
+    (lambda d: d["red"]["reflectance"].__setitem__("value", [2, 0, 0]), "scene.red.reflectance.value"),
+    (lambda d: d["sensor"]["film"].__setitem__("width", "wide"), "scene.sensor.film.width"),
+    (lambda d: d["integrator"].__setitem__("max_depth", 2.5), "scene.integrator.max_depth"),
+    (lambda d: d["sensor"].__setitem__("fov_axis", "z"), "scene.sensor.fov_axis"),
+])
+def test_bad_input_names_the_key_path(mutate, where):
+    d = pbr.cornell_box(8, 4)
+    mutate(d)
+    with pytest.raises(pbr.SceneError) as e:
+        pbr.load_dict(d)
+    assert str(e.value).startswith(where), str(e.value)
+
+
+def test_load_file_roundtrip(tmp_path):
+    xml = tmp_path / "s.xml"
+    xml.write_text("""<scene version="3.0.0">
+  <default name="spp" value="4"/>
+  <sensor type="perspective"><float name="fov" value="40"/>
+    <transform name="to_world"><lookat origin="0,0,4" target="0,0,0" up="0,1,0"/></transform>
+    <sampler type="independent"><integer name="sample_count" value="$spp"/></sampler>
+    <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="6"/></film>
+  </sensor>
+  <shape type="rectangle"><emitter type="area"><rgb name="radiance" value="1,2,3"/></emitter></shape>
+</scene>""")
+    scene = pbr.load_file(str(xml), spp=512)
+    assert scene.spp == 512
+    a = np.asarray(pbr.render(scene))
+    assert a.shape == (6, 8, 3)
+    # The rectangle fills the centre of the view; its radiance is rgb (1, 2, 3).
+    assert np.allclose(a[2:4, 3:5].mean(axis=(0, 1)), [1, 2, 3], rtol=0.05), a[2:4, 3:5]
+    with pytest.raises(FileNotFoundError):
+        pbr.load_file(str(tmp_path / "missing.xml"))
+
+
+def test_backend_errors():
+    with pytest.raises(pbr.BackendError):
+        pbr.set_backend("metal")
+    assert pbr.get_backend() in ("llvm", "cuda")
