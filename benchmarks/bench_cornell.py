@@ -17,14 +17,22 @@ import drjit as dr
 import mitsuba as mi
 
 
-def timed(fn, reps):
-    fn()  # warm-up: traces and compiles (kernels are cached afterwards)
-    ts = []
+def _time(fn):
+    t = time.perf_counter()
+    fn()
+    return time.perf_counter() - t
+
+
+def interleaved(fa, fb, reps):
+    """Median times of fa and fb and the median of per-pair ratios, alternating the two
+    so that machine-load drift affects both alike. One warm-up each (compilation)."""
+    fa(), fb()
+    ta, tb = [], []
     for _ in range(reps):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return float(np.median(ts))
+        ta.append(_time(fa))
+        tb.append(_time(fb))
+    ratios = np.array(ta) / np.array(tb)
+    return float(np.median(ta)), float(np.median(tb)), float(np.median(ratios))
 
 
 def main(argv=None):
@@ -52,13 +60,12 @@ def main(argv=None):
         dr.eval(img)
         np.asarray(img)
 
-    t_pbr = timed(run_pbr, a.reps)
-    t_mi = timed(run_mi, a.reps)
+    t_pbr, t_mi, ratio = interleaved(run_pbr, run_mi, a.reps)
     n = a.res * a.res * a.spp
     print(f"Cornell box {a.res}x{a.res}, {a.spp} spp, max_depth {a.max_depth}, backend {pbr.get_backend()}")
     print(f"  pbr     : {t_pbr:.3f} s  {n / t_pbr / 1e6:.2f} Msamples/s")
     print(f"  mitsuba : {t_mi:.3f} s  {n / t_mi / 1e6:.2f} Msamples/s")
-    print(f"  time ratio pbr/mitsuba = {t_pbr / t_mi:.3f}")
+    print(f"  time ratio pbr/mitsuba = {ratio:.3f} (median of {a.reps} interleaved pairs)")
 
 
 if __name__ == "__main__":

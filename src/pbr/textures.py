@@ -188,7 +188,7 @@ class TextureSet:
         m = [dr.gather(mi.Float, a, i) for a in M]
         return mi.Point2f(m[0] * uv[0] + m[1] * uv[1] + m[2], m[3] * uv[0] + m[4] * uv[1] + m[5])
 
-    def _eval_constant(self, ci, lam, active):
+    def _eval_constant(self, ci, lam, active, illuminant=True):
         T = self.T
         v = mi.Spectrum(1.0)
         base = dr.gather(mi.UInt32, T["c_base"], ci, active)
@@ -200,7 +200,7 @@ class TextureSet:
             tab = mi.Spectrum([self._lerp_1nm(T["c_tab"], off, lam[k], active & (base == BASE_TABLE))
                                for k in range(spec.N_WAVELENGTHS)])
             v = dr.select(base == BASE_TABLE, tab, v)
-        if self.has_d65 and self.constants:
+        if illuminant and self.has_d65 and self.constants:
             v = dr.select(dr.gather(mi.Bool, T["c_d65"], ci, active), v * spec.d65(lam), v)
         return v * dr.gather(mi.Float, T["c_scale"], ci, active)
 
@@ -213,7 +213,7 @@ class TextureSet:
         b = dr.gather(mi.Float, table, off + i0 + 1, active)
         return dr.fma(w, b - a, a)
 
-    def _eval_bitmap(self, bi, uv, lam, active):
+    def _eval_bitmap(self, bi, uv, lam, active, illuminant=True):
         T = self.T
         size = dr.gather(mi.Array2u, T["b_size"], bi, active)
         off = dr.gather(mi.UInt32, T["b_offset"], bi, active)
@@ -240,12 +240,14 @@ class TextureSet:
             v0 = dr.fma(w1.x, v10 - v, v)
             v1 = dr.fma(w1.x, v11 - v01, v01)
             v = dr.select(bil, dr.fma(w1.y, v1 - v0, v0), v)
-        if self.has_d65:
+        if illuminant and self.has_d65:
             v = dr.select(dr.gather(mi.Bool, T["b_d65"], bi, active), v * spec.d65(lam), v)
         return v
 
-    def eval(self, slot, uv, lam: mi.Spectrum, active=True) -> mi.Spectrum:
-        """Spectrum of texture ``slot`` at surface coordinates ``uv``."""
+    def eval(self, slot, uv, lam: mi.Spectrum, active=True, illuminant=True) -> mi.Spectrum:
+        """Spectrum of texture ``slot`` at surface coordinates ``uv``. Callers that can only
+        reach non-illuminant textures (reflectances) pass ``illuminant=False`` to keep
+        the D65 lookup out of their kernels."""
         T = self.T
         slot = mi.UInt32(slot)
         if len(self.items) == 1 or not (self.checkers or self.bitmaps):
@@ -264,10 +266,10 @@ class TextureSet:
                 c0 = dr.gather(mi.UInt32, T["k_color0"], idx, is_ck)
                 c1 = dr.gather(mi.UInt32, T["k_color1"], idx, is_ck)
                 ci = dr.select(is_ck, dr.select(same, c0, c1), idx)
-            result = self._eval_constant(ci, lam, active & (kind != BITMAP))
+            result = self._eval_constant(ci, lam, active & (kind != BITMAP), illuminant)
         if self.bitmaps:
             is_bm = active & (kind == BITMAP)
-            result = dr.select(is_bm, self._eval_bitmap(idx, uv, lam, is_bm), result)
+            result = dr.select(is_bm, self._eval_bitmap(idx, uv, lam, is_bm, illuminant), result)
         return result
 
 

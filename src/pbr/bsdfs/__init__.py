@@ -53,3 +53,6 @@ class BSDFSet:
 
     def sample(self, bsdf_id, ctx, u1, u2, active) -> BSDFSample:
         return self._dispatch("sample", bsdf_id, ctx, active, u1, u2)
+
+    def eval_pdf_sample(self, bsdf_id, ctx, wo, u1, u2, active):
+        return self._dispatch("eval_pdf_sample", bsdf_id, ctx, active, wo, u1, u2)

@@ -64,3 +64,9 @@ class BSDFType:
 
     def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
         raise NotImplementedError
+
+    def eval_pdf_sample(self, ctx, idx, wo, u1, u2, active):
+        """``eval_pdf(wo)`` and ``sample(u1, u2)`` at once; families override it to share
+        texture lookups between the two (one vertex needs both)."""
+        f, pdf = self.eval_pdf(ctx, idx, wo, active)
+        return f, pdf, self.sample(ctx, idx, u1, u2, active)

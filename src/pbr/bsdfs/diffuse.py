@@ -26,19 +26,28 @@ class Diffuse(BSDFType):
 
     def _albedo(self, ctx, idx, active):
         slot = dr.gather(mi.UInt32, self.reflectance, idx, active)
-        return ctx.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, active)
+        return ctx.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, active, illuminant=False)
+
+    @staticmethod
+    def _eval(albedo, wi, wo):
+        ok = (wi.z > 0) & (wo.z > 0)
+        return dr.select(ok, albedo * (dr.inv_pi * wo.z), 0.0), dr.select(ok, cosine_hemisphere_pdf(wo), 0.0)
+
+    @staticmethod
+    def _sample(albedo, wi, u2):
+        wo = square_to_cosine_hemisphere(u2)
+        ok = (wi.z > 0) & (wo.z > 0)
+        # f cos / pdf = albedo for a cosine-distributed direction.
+        return BSDFSample(wo, dr.select(ok, cosine_hemisphere_pdf(wo), 0.0), mi.Float(1.0), mi.Bool(False),
+                          dr.select(ok, albedo, 0.0))
 
     def eval_pdf(self, ctx, idx, wo, active):
-        wi = ctx.si.wi
-        active = active & (wi.z > 0) & (wo.z > 0)
-        f = self._albedo(ctx, idx, active) * (dr.inv_pi * wo.z)
-        return dr.select(active, f, 0.0), dr.select(active, cosine_hemisphere_pdf(wo), 0.0)
+        return self._eval(self._albedo(ctx, idx, active), ctx.si.wi, wo)
 
     def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
-        wo = square_to_cosine_hemisphere(u2)
-        active = active & (ctx.si.wi.z > 0) & (wo.z > 0)
-        pdf = cosine_hemisphere_pdf(wo)
-        # f cos / pdf = albedo for a cosine-distributed direction.
-        w = self._albedo(ctx, idx, active)
-        return BSDFSample(wo, dr.select(active, pdf, 0.0), mi.Float(1.0), mi.Bool(False),
-                          dr.select(active, w, 0.0))
+        return self._sample(self._albedo(ctx, idx, active), ctx.si.wi, u2)
+
+    def eval_pdf_sample(self, ctx, idx, wo, u1, u2, active):
+        albedo = self._albedo(ctx, idx, active)
+        f, pdf = self._eval(albedo, ctx.si.wi, wo)
+        return f, pdf, self._sample(albedo, ctx.si.wi, u2)

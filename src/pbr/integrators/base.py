@@ -76,11 +76,9 @@ class SamplingIntegrator:
                 L, _ = self.sample(scene, rng, ray, wl, PRIMAL, None, None, inside)
                 xyz = spec.to_xyz(L, wl) * weight
                 xyz = dr.select(dr.isfinite(xyz), xyz, 0.0)
-                dr.eval(xyz, weight)
-                sx = dr.block_sum(xyz, per_pass)
-                sw = dr.block_sum(weight, per_pass)
-                sum_xyz += np.array(sx).T
-                sum_w += np.array(sw)
+                sx, sw = _pixel_sums(xyz, weight, w * h, per_pass)
+                sum_xyz += sx
+                sum_w += sw
                 if bar:
                     bar.update(1)
         if bar:
@@ -129,9 +127,9 @@ class SamplingIntegrator:
                 dL, _ = self.sample(scene, rng, ray, wl, FORWARD, None, L, inside)
                 xyz = spec.to_xyz(dL, wl) * weight
                 xyz = dr.select(dr.isfinite(xyz), xyz, 0.0)
-                dr.eval(xyz, weight)
-                sum_xyz += np.array(dr.block_sum(xyz, per_pass)).T
-                sum_w += np.array(dr.block_sum(weight, per_pass))
+                sx, sw = _pixel_sums(xyz, weight, w * h, per_pass)
+                sum_xyz += sx
+                sum_w += sw
         rgb = spec.xyz_to_srgb(sum_xyz / np.maximum(sum_w, 1e-30)[:, None])
         return mi.TensorXf(rgb.astype(np.float32).reshape(h, w, 3))
 
@@ -142,9 +140,21 @@ class SamplingIntegrator:
         with dr.suspend_grad():
             for p in range(n_pass):
                 _, _, _, weight, _ = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
-                dr.eval(weight)
-                sum_w += np.array(dr.block_sum(weight, per_pass))
+                sum_w += _pixel_sums(None, weight, w * h, per_pass)[1]
         return np.maximum(sum_w, 1e-30)
+
+
+def _pixel_sums(xyz, weight, n_pixels, per_pass):
+    """Per-pixel sums of w * XYZ and w over a pass's pixel-major samples, reduced inside
+    the rendering kernel (a local scatter-add), so per-sample values are never stored."""
+    pixel = dr.arange(mi.UInt32, dr.width(weight)) // per_pass
+    acc = dr.zeros(mi.Float, n_pixels * 4)
+    ch = [xyz[0], xyz[1], xyz[2], weight] if xyz is not None else [None, None, None, weight]
+    for k, v in enumerate(ch):
+        if v is not None:
+            dr.scatter_reduce(dr.ReduceOp.Add, acc, v, pixel * 4 + k, mode=dr.ReduceMode.Local)
+    a = np.array(acc, dtype=np.float64).reshape(n_pixels, 4)
+    return a[:, :3], a[:, 3]
 
 
 def _snapshot(rng):

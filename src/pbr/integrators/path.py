@@ -82,15 +82,15 @@ class PathIntegrator(SamplingIntegrator):
             em = active_next & (ls.pdf > 0)
             em &= geo.unoccluded(si, ls.p, em)
             wo_em = si.to_local(ls.wi)
-            with dr.resume_grad(when=not primal):
-                f_em, pdf_em = bsdfs.eval_pdf(bsdf_id, ctx, wo_em, em)
-                w_em = power_heuristic(ls.pdf, pdf_em)
-                Ld = dr.select(em, beta * f_em * ls.L * (w_em / ls.pdf), 0.0)
-
-            # Continue the path by sampling the BSDF.
+            # The BSDF is evaluated toward the light and sampled (to continue the path)
+            # in one call, so texture lookups are shared.
             u1 = rng.next_float32()
             u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
-            bs = bsdfs.sample(bsdf_id, ctx, u1, u2, active_next)
+            with dr.resume_grad(when=not primal):
+                f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, active_next)
+                w_em = power_heuristic(ls.pdf, pdf_em)
+                Ld = dr.select(em, beta * f_em * ls.L * (w_em / ls.pdf), 0.0)
+            bs = dr.detach(bs)
             cont = active_next & (bs.pdf > 0)
 
             if primal:
