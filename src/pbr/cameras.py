@@ -78,11 +78,11 @@ class PerspectiveCamera:
         x = (1.0 - 2.0 * (pos.x + self.pp[0])) * tx
         y = (1.0 - 2.0 * (pos.y + self.pp[1])) * tx / self.aspect
         d = dr.normalize(mi.Vector3f(x, y, 1.0))
-        m = self.to_world
-        dw = mi.Vector3f(*[m[r, 0] * d.x + m[r, 1] * d.y + m[r, 2] * d.z for r in range(3)])
+        m = self.to_world.tolist()  # Python floats: numpy scalars would pull arrays into numpy
+        dw = mi.Vector3f(*[m[r][0] * d.x + m[r][1] * d.y + m[r][2] * d.z for r in range(3)])
         inv_z = dr.rcp(d.z)
         near_t, far_t = self.near_clip * inv_z, self.far_clip * inv_z
-        o = mi.Point3f(*m[:3, 3].tolist()) + dw * near_t
+        o = mi.Point3f(m[0][3], m[1][3], m[2][3]) + dw * near_t
         return mi.Ray3f(o, dw, far_t - near_t, 0.0, mi.Spectrum(0))
 
 

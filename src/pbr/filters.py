@@ -1,17 +1,18 @@
 """Pixel reconstruction filters ``box``, ``tent`` and ``gaussian`` (Mitsuba's names,
 radii and formulas), used by *filter importance sampling* as in pbrt-v4: a camera
-sample's offset from the pixel centre is drawn from a tabulated density close to the
-filter, and carries the weight f(x) / pdf(x). The film divides by the sum of weights, so
+sample's offset from the pixel centre is drawn (analytically, per axis) from a density
+proportional or close to the filter, and carries the weight f(x) / pdf(x). The film divides by the sum of weights, so
 each pixel estimates  int f(x - p) L(x) dx / int f(x - p) dx,  which is what Mitsuba's
 splatting film converges to."""
 
 from __future__ import annotations
 
+import math
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-_BINS = 256
 
 
 class Filter:
@@ -24,30 +25,14 @@ class Filter:
     def eval(self, x):
         raise NotImplementedError
 
-    def build(self) -> None:
-        xs = np.linspace(-self.radius, self.radius, _BINS + 1)
-        mid = 0.5 * (xs[1:] + xs[:-1])
-        f = np.maximum(self.eval_np(mid), 0.0) + 1e-6
-        pmf = f / f.sum()
-        cdf = np.concatenate([[0.0], np.cumsum(pmf)])
-        cdf[-1] = 1.0
-        self._cdf = mi.Float(cdf.astype(np.float32))
-        self._pmf = mi.Float(pmf.astype(np.float32))
-
-    def _sample1(self, u):
-        i = dr.binary_search(0, _BINS - 1, lambda k: dr.gather(mi.Float, self._cdf, k + 1) <= u)
-        i = dr.minimum(i, _BINS - 1)
-        c0 = dr.gather(mi.Float, self._cdf, i)
-        pmf = dr.gather(mi.Float, self._pmf, i)
-        dx = 2.0 * self.radius / _BINS
-        t = dr.clip((u - c0) / pmf, 0.0, 1.0)
-        x = -self.radius + (mi.Float(i) + t) * dx
-        return x, self.eval(x) / (pmf / dx)
+    def sample1(self, u):
+        """(offset along one axis, weight f / pdf) for a uniform ``u``."""
+        raise NotImplementedError
 
     def sample(self, u: mi.Point2f):
-        """(offset from the pixel centre, weight f/pdf)."""
-        x, wx = self._sample1(u.x)
-        y, wy = self._sample1(u.y)
+        """(offset from the pixel centre, weight f/pdf); the filters are separable."""
+        x, wx = self.sample1(u.x)
+        y, wy = self.sample1(u.y)
         return mi.Vector2f(x, y), wx * wy
 
 
@@ -57,7 +42,6 @@ class BoxFilter(Filter):
     def __init__(self, props):
         self.radius = props.float("radius", 0.5, min=1e-6)
         props.finish()
-        self.build()
 
     def eval_np(self, x):
         return (np.abs(x) <= self.radius).astype(np.float64)
@@ -65,7 +49,7 @@ class BoxFilter(Filter):
     def eval(self, x):
         return dr.select(dr.abs(x) <= self.radius, 1.0, 0.0)
 
-    def sample(self, u):
+    def sample1(self, u):
         return (u - 0.5) * (2.0 * self.radius), mi.Float(1.0)
 
 
@@ -75,13 +59,18 @@ class TentFilter(Filter):
     def __init__(self, props):
         self.radius = props.float("radius", 1.0, min=1e-6)
         props.finish()
-        self.build()
 
     def eval_np(self, x):
         return np.maximum(0.0, 1.0 - np.abs(x) / self.radius)
 
     def eval(self, x):
         return dr.maximum(0.0, 1.0 - dr.abs(x) / self.radius)
+
+    def sample1(self, u):
+        """Inverse CDF of the tent: exact importance sampling, constant weight."""
+        lo = u < 0.5
+        t = dr.select(lo, dr.sqrt(2.0 * u) - 1.0, 1.0 - dr.sqrt(dr.maximum(2.0 - 2.0 * u, 0.0)))
+        return t * self.radius, mi.Float(1.0)
 
 
 class GaussianFilter(Filter):
@@ -94,13 +83,22 @@ class GaussianFilter(Filter):
         self.radius = 4.0 * self.stddev
         self._alpha = -1.0 / (2.0 * self.stddev ** 2)
         self._bias = float(np.exp(self._alpha * self.radius ** 2))
-        self.build()
+        # Sampling density: the normal distribution truncated to [-radius, radius].
+        self._erf_r = math.erf(self.radius / (self.stddev * math.sqrt(2.0)))
+        self._norm = self.stddev * math.sqrt(2.0 * math.pi) * self._erf_r
 
     def eval_np(self, x):
         return np.maximum(0.0, np.exp(self._alpha * x * x) - self._bias)
 
     def eval(self, x):
         return dr.maximum(0.0, dr.exp(self._alpha * x * x) - self._bias)
+
+    def sample1(self, u):
+        """Truncated normal by inverse CDF; weight f / pdf = 1 - bias / exp(alpha x^2)."""
+        v = dr.clip((2.0 * u - 1.0) * self._erf_r, -0.99999994, 0.99999994)
+        x = dr.clip(dr.erfinv(v) * (self.stddev * math.sqrt(2.0)), -self.radius, self.radius)
+        g = dr.exp(self._alpha * x * x)
+        return x, dr.maximum(0.0, (g - self._bias) / g) * self._norm
 
 
 FILTERS = {"box": BoxFilter, "tent": TentFilter, "gaussian": GaussianFilter}

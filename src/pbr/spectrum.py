@@ -177,21 +177,21 @@ def to_xyz_adjoint(g_xyz: mi.Array3f, wl: SampledWavelengths) -> mi.Spectrum:
 
 def srgb_to_xyz_adjoint(g_rgb: mi.Array3f) -> mi.Array3f:
     """Transpose of :func:`xyz_to_srgb` (maps an sRGB adjoint to an XYZ adjoint)."""
-    m = XYZ_TO_SRGB
-    return mi.Array3f(*[m[0, c] * g_rgb[0] + m[1, c] * g_rgb[1] + m[2, c] * g_rgb[2] for c in range(3)])
+    m = XYZ_TO_SRGB.tolist()
+    return mi.Array3f(*[m[0][c] * g_rgb[0] + m[1][c] * g_rgb[1] + m[2][c] * g_rgb[2] for c in range(3)])
 
 
 def xyz_to_srgb(xyz):
     """XYZ -> linear sRGB; works on Dr.Jit Array3f and on numpy (..., 3) arrays."""
     if isinstance(xyz, np.ndarray):
         return xyz @ XYZ_TO_SRGB.T
-    m = XYZ_TO_SRGB
-    return type(xyz)(*[m[r, 0] * xyz[0] + m[r, 1] * xyz[1] + m[r, 2] * xyz[2] for r in range(3)])
+    m = XYZ_TO_SRGB.tolist()  # Python floats (numpy scalars would convert Dr.Jit arrays)
+    return type(xyz)(*[m[r][0] * xyz[0] + m[r][1] * xyz[1] + m[r][2] * xyz[2] for r in range(3)])
 
 
 def luminance_rgb(rgb):
     """Luminance (Y) of linear sRGB values."""
-    m = SRGB_TO_XYZ[1]
+    m = SRGB_TO_XYZ[1].tolist()
     return m[0] * rgb[0] + m[1] * rgb[1] + m[2] * rgb[2]
 
 

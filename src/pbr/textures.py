@@ -177,6 +177,7 @@ class TextureSet:
             T["b_to_uv"] = [mi.Float([b.to_uv[r, k] for b in bm]) for r in range(2) for k in (0, 1, 3)]
         dr.eval(T)
         self.T = T
+        self.bases = {c.base for c in consts}
         self.has_sigmoid = any(c.base == BASE_SIGMOID for c in consts)
         self.has_table = any(c.base == BASE_TABLE for c in consts)
         self.has_d65 = any(c.form == "illuminant" for c in consts) or any(
@@ -191,11 +192,15 @@ class TextureSet:
     def _eval_constant(self, ci, lam, active, illuminant=True):
         T = self.T
         v = mi.Spectrum(1.0)
-        base = dr.gather(mi.UInt32, T["c_base"], ci, active)
         if self.has_sigmoid:
             c = dr.gather(mi.Array3f, T["c_coeffs"], ci, active)
-            v = dr.select(base == BASE_SIGMOID, spec.sigmoid_polynomial(c, lam), v)
+            if self.bases == {BASE_SIGMOID}:
+                v = spec.sigmoid_polynomial(c, lam)
+            else:
+                base = dr.gather(mi.UInt32, T["c_base"], ci, active)
+                v = dr.select(base == BASE_SIGMOID, spec.sigmoid_polynomial(c, lam), v)
         if self.has_table:
+            base = dr.gather(mi.UInt32, T["c_base"], ci, active)
             off = dr.gather(mi.UInt32, T["c_tab_offset"], ci, active)
             tab = mi.Spectrum([self._lerp_1nm(T["c_tab"], off, lam[k], active & (base == BASE_TABLE))
                                for k in range(spec.N_WAVELENGTHS)])
@@ -254,7 +259,9 @@ class TextureSet:
             kind = mi.UInt32(self.kind_of(0)) if len(self.items) == 1 else mi.UInt32(CONSTANT)
         else:
             kind = dr.gather(mi.UInt32, T["slot_kind"], slot, active)
-        idx = dr.gather(mi.UInt32, T["slot_index"], slot, active)
+        # With constants only, slots are constant-table indices already.
+        only_constants = not (self.checkers or self.bitmaps)
+        idx = slot if only_constants else dr.gather(mi.UInt32, T["slot_index"], slot, active)
         result = mi.Spectrum(0.0)
         if self.constants:
             ci = idx
