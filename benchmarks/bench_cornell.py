@@ -52,7 +52,7 @@ def main(argv=None):
 
     def run_pbr():
         seed[0] += 1
-        np.asarray(pbr.render(scene, spp=a.spp, seed=seed[0]))
+        np.asarray(pbr.render(scene, spp=a.spp, seed=seed[0], progress=False))
 
     def run_mi():
         seed[0] += 1
