@@ -19,8 +19,6 @@ class Filter:
     name = ""
     radius = 0.5
 
-    def eval_np(self, x: np.ndarray) -> np.ndarray:
-        raise NotImplementedError
 
     def eval(self, x):
         raise NotImplementedError
@@ -43,8 +41,6 @@ class BoxFilter(Filter):
         self.radius = props.float("radius", 0.5, min=1e-6)
         props.finish()
 
-    def eval_np(self, x):
-        return (np.abs(x) <= self.radius).astype(np.float64)
 
     def eval(self, x):
         return dr.select(dr.abs(x) <= self.radius, 1.0, 0.0)
@@ -60,8 +56,6 @@ class TentFilter(Filter):
         self.radius = props.float("radius", 1.0, min=1e-6)
         props.finish()
 
-    def eval_np(self, x):
-        return np.maximum(0.0, 1.0 - np.abs(x) / self.radius)
 
     def eval(self, x):
         return dr.maximum(0.0, 1.0 - dr.abs(x) / self.radius)
@@ -87,8 +81,6 @@ class GaussianFilter(Filter):
         self._erf_r = math.erf(self.radius / (self.stddev * math.sqrt(2.0)))
         self._norm = self.stddev * math.sqrt(2.0 * math.pi) * self._erf_r
 
-    def eval_np(self, x):
-        return np.maximum(0.0, np.exp(self._alpha * x * x) - self._bias)
 
     def eval(self, x):
         return dr.maximum(0.0, dr.exp(self._alpha * x * x) - self._bias)

@@ -64,28 +64,34 @@ class SamplingIntegrator:
         return rng, wl, ray, weight, inside
 
     # -- rendering ------------------------------------------------------------------------
-    def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
-        """Primal image: ``mi.TensorXf`` (H, W, 3), linear sRGB."""
+    def _film(self, scene, sensor, seed, spp, radiance, progress=None):
+        """Develop an image from per-sample spectra ``radiance(rng, ray, wl, inside)``
+        (radiance for the primal image, its derivative for forward mode): pass by pass,
+        accumulate w * XYZ and w per pixel, then convert to linear sRGB."""
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
         sum_xyz = np.zeros((w * h, 3))
         sum_w = np.zeros(w * h)
         bar = _progress(n_pass, progress)
-        with dr.suspend_grad():
-            for p in range(n_pass):
+        for p in range(n_pass):
+            with dr.suspend_grad():
                 rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
-                L, _ = self.sample(scene, rng, ray, wl, PRIMAL, None, None, inside)
-                xyz = spec.to_xyz(L, wl) * weight
+                xyz = spec.to_xyz(radiance(rng, ray, wl, inside), wl) * weight
                 xyz = dr.select(dr.isfinite(xyz), xyz, 0.0)
                 sx, sw = _pixel_sums(xyz, weight, w * h, per_pass)
-                sum_xyz += sx
-                sum_w += sw
-                if bar:
-                    bar.update(1)
+            sum_xyz += sx
+            sum_w += sw
+            if bar:
+                bar.update(1)
         if bar:
             bar.close()
         rgb = spec.xyz_to_srgb(sum_xyz / np.maximum(sum_w, 1e-30)[:, None])
-        self.last_weights = sum_w
         return mi.TensorXf(rgb.astype(np.float32).reshape(h, w, 3))
+
+    def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
+        """Primal image: ``mi.TensorXf`` (H, W, 3), linear sRGB."""
+        def radiance(rng, ray, wl, inside):
+            return self.sample(scene, rng, ray, wl, PRIMAL, None, None, inside)[0]
+        return self._film(scene, sensor, seed, spp, radiance, progress)
 
     def _develop_adjoint(self, wl, weight, pixel_w, grad_img_flat, pixel, active):
         """Per-sample adjoint radiance dLoss/dL for a film adjoint ``grad_img`` (the film
@@ -114,24 +120,13 @@ class SamplingIntegrator:
 
     def render_forward(self, scene, sensor=0, seed=0, spp=0):
         """Forward-mode derivative of the image w.r.t. the gradients set on parameters."""
-        cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
-        sum_xyz = np.zeros((w * h, 3))
-        sum_w = np.zeros(w * h)
-        for p in range(n_pass):
-            with dr.suspend_grad():
-                rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
-                state = _snapshot(rng)
-                L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
-                dr.eval(L)
-                rng.state, rng.inc = _snapshot(state)
-                dL, _ = self.sample(scene, rng, ray, wl, FORWARD, None, L, inside)
-                xyz = spec.to_xyz(dL, wl) * weight
-                xyz = dr.select(dr.isfinite(xyz), xyz, 0.0)
-                sx, sw = _pixel_sums(xyz, weight, w * h, per_pass)
-                sum_xyz += sx
-                sum_w += sw
-        rgb = spec.xyz_to_srgb(sum_xyz / np.maximum(sum_w, 1e-30)[:, None])
-        return mi.TensorXf(rgb.astype(np.float32).reshape(h, w, 3))
+        def radiance_derivative(rng, ray, wl, inside):
+            state = _snapshot(rng)
+            L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
+            dr.eval(L)
+            rng.state, rng.inc = _snapshot(state)
+            return self.sample(scene, rng, ray, wl, FORWARD, None, L, inside)[0]
+        return self._film(scene, sensor, seed, spp, radiance_derivative, progress=False)
 
     def _pixel_weights(self, scene, sensor, seed, spp):
         """Sum of filter weights per pixel (depends only on the random numbers)."""
