@@ -11,7 +11,6 @@ import math
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
 
 
@@ -41,7 +40,6 @@ class BoxFilter(Filter):
         self.radius = props.float("radius", 0.5, min=1e-6)
         props.finish()
 
-
     def eval(self, x):
         return dr.select(dr.abs(x) <= self.radius, 1.0, 0.0)
 
@@ -55,7 +53,6 @@ class TentFilter(Filter):
     def __init__(self, props):
         self.radius = props.float("radius", 1.0, min=1e-6)
         props.finish()
-
 
     def eval(self, x):
         return dr.maximum(0.0, 1.0 - dr.abs(x) / self.radius)
@@ -76,7 +73,7 @@ class GaussianFilter(Filter):
         props.finish()
         self.radius = 4.0 * self.stddev
         self._alpha = -1.0 / (2.0 * self.stddev ** 2)
-        self._bias = float(np.exp(self._alpha * self.radius ** 2))
+        self._bias = math.exp(self._alpha * self.radius ** 2)
         # Sampling density: the normal distribution truncated to [-radius, radius].
         self._erf_r = math.erf(self.radius / (self.stddev * math.sqrt(2.0)))
         self._norm = self.stddev * math.sqrt(2.0 * math.pi) * self._erf_r
