@@ -4,7 +4,8 @@ At each vertex: emission found by BSDF sampling is weighted by the power heurist
 against light sampling; one light is sampled (via the scene's light sampler) and
 weighted against BSDF sampling; the path continues by BSDF sampling, with Russian
 roulette from ``rr_depth`` on. ``max_depth`` has Mitsuba's meaning (-1: unlimited,
-1: only emitters seen directly, 2: direct lighting).
+1: only emitters seen directly, 2: direct lighting); so has ``hide_emitters``: camera
+rays pass through area lights (showing what lies behind them).
 
 The same routine is the PRB adjoint: in ``FORWARD``/``BACKWARD`` mode it replays a
 path whose primal radiance is ``L_in`` and, at each vertex, differentiates the emitted,
@@ -63,15 +64,16 @@ class PathIntegrator(SamplingIntegrator):
             # Emission found by BSDF sampling (or seen directly), MIS-weighted.
             light = dr.gather(mi.UInt32, scene.shape_light, shape, hit)
             on_light = hit & (light > 0)
-            if self.hide_emitters:
-                on_light &= depth > 0
+            # hide_emitters (Mitsuba's meaning): camera rays pass through area lights.
+            skip = on_light & (depth == 0) if self.hide_emitters else mi.Bool(False)
+            on_light &= ~skip
             with dr.resume_grad(when=not primal):
                 Le = lights.L(light - 1, si, wl, tex, on_light)
                 pdf_light = lights.pdf_Li(light - 1, prev_p, si, on_light & ~prev_delta)
                 w_hit = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_light))
                 Le = dr.select(on_light, beta * Le * w_hit, 0.0)
 
-            active_next = hit & (depth + 1 < max_depth)
+            active_next = hit & ~skip & (depth + 1 < max_depth)
             ctx = ShadingContext(si, wl, tex)
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, active_next)
 
@@ -108,20 +110,20 @@ class PathIntegrator(SamplingIntegrator):
                     else:
                         dL_fwd += mi.Spectrum(dr.forward_to(Lo))
 
-            beta *= bs.weight
-            eta *= bs.eta
+            beta[~skip] = beta * bs.weight
+            eta[~skip] = eta * bs.eta
             prev_p = mi.Point3f(si.p)
             prev_pdf = mi.Float(bs.pdf)
-            prev_delta = mi.Bool(bs.delta)
-            ray = si.spawn_ray(si.to_world(bs.wo))
-            depth[hit] = depth + 1
+            prev_delta = skip | bs.delta
+            ray = dr.select(skip, si.spawn_ray(ray.d), si.spawn_ray(si.to_world(bs.wo)))
+            depth[hit & ~skip] = depth + 1
 
             # Russian roulette (the survival probability is detached, as in Mitsuba).
             b_max = dr.max(beta)
             q = dr.minimum(b_max * eta * eta, 0.95)
-            rr = depth >= self.rr_depth
+            rr = (depth >= self.rr_depth) & ~skip
             survive = rng.next_float32() < q
             beta[rr] = beta * dr.rcp(dr.detach(q))
-            active = cont & (~rr | survive) & (b_max > 0)
+            active = skip | (cont & (~rr | survive) & (b_max > 0))
 
         return (L if primal else dL_fwd), valid
