@@ -1,0 +1,96 @@
+"""Fresnel equations (one implementation, shared by every BSDF).
+
+``eta`` is the relative index of refraction interior/exterior; ``cos_theta_i`` is taken
+w.r.t. the surface normal, negative when the incident direction is inside.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+
+def fresnel_dielectric(cos_theta_i, eta):
+    """Unpolarised reflectance of a dielectric interface.
+
+    Returns (R, cos_theta_t, eta_it, eta_ti): the reflectance, the signed cosine of the
+    refracted direction (opposite side), and the relative IORs across the interface in
+    the direction of travel (eta_it = eta_t / eta_i) and back. R = 1 under total
+    internal reflection; R = 0 for index-matched interfaces."""
+    outside = cos_theta_i >= 0
+    rcp_eta = dr.rcp(eta)
+    eta_it = dr.select(outside, eta, rcp_eta)
+    eta_ti = dr.select(outside, rcp_eta, eta)
+    cos_t_sqr = dr.fma(-dr.fma(-cos_theta_i, cos_theta_i, 1.0), eta_ti * eta_ti, 1.0)
+    cos_i = dr.abs(cos_theta_i)
+    cos_t = dr.safe_sqrt(cos_t_sqr)
+    a_s = dr.fma(-eta_it, cos_t, cos_i) / dr.fma(eta_it, cos_t, cos_i)
+    a_p = dr.fma(-eta_it, cos_i, cos_t) / dr.fma(eta_it, cos_i, cos_t)
+    r = 0.5 * (a_s * a_s + a_p * a_p)
+    matched = eta == 1
+    r = dr.select(matched, 0.0, dr.select(cos_i == 0, 1.0, r))
+    cos_theta_t = dr.select(outside, -cos_t, cos_t)
+    return r, cos_theta_t, eta_it, eta_ti
+
+
+def fresnel_conductor(cos_theta_i, eta, k):
+    """Unpolarised reflectance of a conductor with complex IOR eta + i k (per wavelength).
+
+    Exact formula with complex arithmetic: r_s = (c - n c_t)/(c + n c_t),
+    r_p = (n c - c_t)/(n c + c_t), c_t = sqrt(1 - sin^2 / n^2)."""
+    c = dr.clip(dr.abs(cos_theta_i), 0.0, 1.0)
+    s2 = 1.0 - c * c
+    # n^2 = (eta^2 - k^2) + i 2 eta k ; sin_t^2 = s2 / n^2
+    n2_re, n2_im = eta * eta - k * k, 2.0 * eta * k
+    inv = dr.rcp(n2_re * n2_re + n2_im * n2_im)
+    st_re, st_im = s2 * n2_re * inv, -s2 * n2_im * inv
+    ct_re, ct_im = _csqrt(1.0 - st_re, -st_im)
+    # n * c_t
+    nct_re, nct_im = eta * ct_re - k * ct_im, eta * ct_im + k * ct_re
+    rs = _cabs2_ratio(c - nct_re, -nct_im, c + nct_re, nct_im)
+    # n * c
+    nc_re, nc_im = eta * c, k * c
+    rp = _cabs2_ratio(nc_re - ct_re, nc_im - ct_im, nc_re + ct_re, nc_im + ct_im)
+    return 0.5 * (rs + rp)
+
+
+def _csqrt(re, im):
+    """Principal square root of a complex number (re, im)."""
+    r = dr.sqrt(re * re + im * im)
+    a = dr.safe_sqrt(0.5 * (r + re))
+    b = dr.safe_sqrt(0.5 * (r - re))
+    return a, dr.select(im < 0, -b, b)
+
+
+def _cabs2_ratio(ar, ai, br, bi):
+    return (ar * ar + ai * ai) / dr.maximum(br * br + bi * bi, 1e-30)
+
+
+def reflect(wi):
+    """Mirror direction about +z (local frame)."""
+    return mi.Vector3f(-wi.x, -wi.y, wi.z)
+
+
+def reflect_about(wi, m):
+    return 2.0 * dr.dot(wi, m) * m - wi
+
+
+def refract(wi, cos_theta_t, eta_ti):
+    """Refracted direction about +z (local frame) given fresnel_dielectric's outputs."""
+    return mi.Vector3f(-eta_ti * wi.x, -eta_ti * wi.y, cos_theta_t)
+
+
+def refract_about(wi, m, cos_theta_t, eta_ti):
+    """Refracted direction about microfacet normal ``m``."""
+    return m * (dr.dot(wi, m) * eta_ti + cos_theta_t) - wi * eta_ti
+
+
+# Named indices of refraction (Mitsuba's names; values at ~589 nm).
+IOR_TABLE = {
+    "vacuum": 1.0, "helium": 1.000036, "hydrogen": 1.000132, "air": 1.000277,
+    "carbon dioxide": 1.00045, "water": 1.3330, "acetone": 1.36, "ethanol": 1.361,
+    "carbon tetrachloride": 1.461, "glycerol": 1.4729, "benzene": 1.501,
+    "silicone oil": 1.52045, "bromine": 1.661, "water ice": 1.31, "fused quartz": 1.458,
+    "pyrex": 1.470, "acrylic glass": 1.49, "polypropylene": 1.49, "bk7": 1.5046,
+    "sodium chloride": 1.544, "amber": 1.55, "pet": 1.5750, "diamond": 2.419,
+}

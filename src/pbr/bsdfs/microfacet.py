@@ -1,0 +1,97 @@
+"""Microfacet distributions (Trowbridge-Reitz/GGX and Beckmann), isotropic or anisotropic,
+with visible-normal sampling: the one implementation every rough BSDF uses.
+
+All vectors are in the local shading frame (normal +z). ``alpha_u``/``alpha_v`` are the
+roughness along x/y. Smith's masking uses the same approximations as Mitsuba 3
+(exact for GGX, the rational fit for Beckmann), so rough BSDFs agree with it.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from ..sampling import square_to_uniform_disk_concentric
+
+GGX, BECKMANN = "ggx", "beckmann"
+
+
+class Microfacet:
+    def __init__(self, kind: str, alpha_u, alpha_v, sample_visible: bool = True):
+        self.kind = kind
+        # Very small roughness underflows (alpha^4 in D): clamp as pbrt-v4 and Mitsuba do.
+        self.au = dr.maximum(alpha_u, 1e-4)
+        self.av = dr.maximum(alpha_v, 1e-4)
+        # Visible-normal sampling is implemented for GGX; Beckmann samples D(m) cos(theta_m).
+        self.sample_visible = sample_visible and kind == GGX
+
+    def D(self, m):
+        """Normal distribution (projected area density w.r.t. solid angle of m)."""
+        au, av = self.au, self.av
+        cos2 = m.z * m.z
+        if self.kind == BECKMANN:
+            e = -((m.x / au) ** 2 + (m.y / av) ** 2) / cos2
+            r = dr.exp(e) / (dr.pi * au * av * cos2 * cos2)
+        else:
+            t = (m.x / au) ** 2 + (m.y / av) ** 2 + cos2
+            r = dr.rcp(dr.pi * au * av * t * t)
+        r = dr.select(m.z > 0, r, 0.0)
+        return dr.select(r * m.z > 1e-20, r, 0.0)
+
+    def G1(self, v, m):
+        """Smith's masking function for direction v and microfacet normal m."""
+        xy2 = (self.au * v.x) ** 2 + (self.av * v.y) ** 2
+        tan2 = xy2 / (v.z * v.z)
+        if self.kind == BECKMANN:
+            a = dr.rsqrt(tan2)
+            r = dr.select(a >= 1.6, 1.0, (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a))
+        else:
+            r = 2.0 / (1.0 + dr.sqrt(1.0 + tan2))
+        r = dr.select(xy2 == 0, 1.0, r)
+        return dr.select(dr.dot(v, m) * v.z <= 0, 0.0, r)
+
+    def G(self, wi, wo, m):
+        return self.G1(wi, m) * self.G1(wo, m)
+
+    def pdf(self, wi, m):
+        """Density of ``sample(wi)`` returning m (solid angle of m)."""
+        if self.sample_visible:
+            r = self.D(m) * self.G1(wi, m) * dr.abs(dr.dot(wi, m)) / dr.abs(wi.z)
+        else:
+            r = self.D(m) * m.z
+        return dr.select(dr.isfinite(r), r, 0.0)
+
+    def sample(self, wi, u: mi.Point2f):
+        """Sample a microfacet normal; visible normals (Heitz 2018) for GGX when
+        ``sample_visible``, otherwise D(m) cos(theta_m) (used for Beckmann)."""
+        if self.sample_visible and self.kind == GGX:
+            # Stretch wi to the unit-roughness configuration (upper hemisphere).
+            s = dr.select(wi.z < 0, -1.0, 1.0)
+            v = dr.normalize(mi.Vector3f(self.au * wi.x * s, self.av * wi.y * s, wi.z * s))
+            # Sample the projected hemisphere seen from v.
+            p = square_to_uniform_disk_concentric(u)
+            t1, t2 = p.x, p.y
+            h = 0.5 * (1.0 + v.z)
+            t2 = (1.0 - h) * dr.safe_sqrt(1.0 - t1 * t1) + h * t2
+            lensq = v.x * v.x + v.y * v.y
+            inv = dr.rsqrt(dr.maximum(lensq, 1e-30))
+            T1 = dr.select(lensq > 0, mi.Vector3f(-v.y * inv, v.x * inv, 0.0), mi.Vector3f(1.0, 0.0, 0.0))
+            T2 = dr.cross(v, T1)
+            nh = t1 * T1 + t2 * T2 + dr.safe_sqrt(1.0 - t1 * t1 - t2 * t2) * v
+            m = dr.normalize(mi.Vector3f(self.au * nh.x, self.av * nh.y, dr.maximum(nh.z, 1e-6)))
+        else:
+            # Sample D(m) cos(theta_m): tan^2(theta) from the marginal, phi (anisotropic) from the conditional.
+            phi_u = 2.0 * dr.pi * u.y
+            sp, cp = dr.sincos(phi_u)
+            # Anisotropic azimuth: phi = atan(av/au tan(phi_u)), keeping the quadrant.
+            phi = dr.atan2(self.av * sp, self.au * cp)
+            sphi, cphi = dr.sincos(phi)
+            a2 = dr.rcp((cphi / self.au) ** 2 + (sphi / self.av) ** 2)
+            if self.kind == BECKMANN:
+                tan2 = -a2 * dr.log(dr.maximum(1.0 - u.x, 1e-30))
+            else:
+                tan2 = a2 * u.x / dr.maximum(1.0 - u.x, 1e-30)
+            cos_t = dr.rsqrt(1.0 + tan2)
+            sin_t = dr.safe_sqrt(1.0 - cos_t * cos_t)
+            m = mi.Vector3f(sin_t * cphi, sin_t * sphi, cos_t)
+        return m, self.pdf(wi, m)

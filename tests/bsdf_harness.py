@@ -1,0 +1,82 @@
+"""Helpers for BSDF unit tests: build one BSDF from a Mitsuba-style dict, evaluate and
+sample it for given local directions, chi-square tests (Mitsuba's ``mitsuba.chi2``)
+and white-furnace estimates."""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from pbr.bsdfs.base import ShadingContext
+from pbr.scene.loader import Loader
+from pbr.spectrum import SampledWavelengths
+
+
+class OneBSDF:
+    """A BSDF dict loaded on its own, with a shading context for a local ``wi``."""
+
+    def __init__(self, bsdf: dict, lam=(450.0, 520.0, 600.0, 680.0)):
+        self.loader = Loader({"type": "scene"})
+        self.id = self.loader.bsdf(bsdf, "scene.bsdf")
+        self.loader.textures.build()
+        self.loader.bsdfs.build()
+        self.bsdfs = self.loader.bsdfs
+        self.lam = lam
+
+    def ctx(self, wi, n):
+        si = dr.zeros(mi.SurfaceInteraction3f, n)
+        si.wi = wi
+        si.uv = mi.Point2f(0.5, 0.5)
+        si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+        si.n = mi.Vector3f(0, 0, 1)
+        wl = SampledWavelengths(mi.Spectrum(*[mi.Float(l) for l in self.lam]) + dr.zeros(mi.Spectrum, n),
+                                mi.Spectrum(1.0 / 470.0))
+        return ShadingContext(si, wl, self.loader.textures)
+
+    def eval_pdf(self, wi, wo):
+        n = dr.width(wo)
+        wi = mi.Vector3f(wi) + dr.zeros(mi.Vector3f, n)
+        return self.bsdfs.eval_pdf(mi.UInt32(self.id) + dr.zeros(mi.UInt32, n), self.ctx(wi, n), wo, mi.Bool(True))
+
+    def sample(self, wi, u1, u2):
+        n = dr.width(u1)
+        wi = mi.Vector3f(wi) + dr.zeros(mi.Vector3f, n)
+        return self.bsdfs.sample(mi.UInt32(self.id) + dr.zeros(mi.UInt32, n), self.ctx(wi, n), u1, u2, mi.Bool(True))
+
+
+def direction(theta_deg: float, phi_deg: float = 0.0) -> mi.Vector3f:
+    t, p = math.radians(theta_deg), math.radians(phi_deg)
+    return mi.Vector3f(math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t))
+
+
+def chi2_bsdf(bsdf: dict, wi, sample_count=200_000, res=101, **kw) -> tuple[bool, str]:
+    """Chi-square test of ``sample`` against ``pdf`` over the sphere of outgoing directions."""
+    from mitsuba.chi2 import ChiSquareTest, SphericalDomain
+    b = OneBSDF(bsdf, **kw)
+
+    def sample_func(s):
+        bs = b.sample(wi, s.x, mi.Point2f(s.y, s.z))
+        return dr.select(bs.pdf > 0, bs.wo, mi.Vector3f(0, 0, 0))
+
+    def pdf_func(wo):
+        return b.eval_pdf(wi, wo)[1]
+
+    t = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
+                      sample_dim=3, sample_count=sample_count, res=res)
+    ok = t.run()
+    return ok, t.messages
+
+
+def furnace(bsdf: dict, wi, n=1 << 18, **kw) -> np.ndarray:
+    """Monte Carlo estimate of the directional albedo int f |cos| dwo per wavelength
+    (the mean sampled weight), and its maximum weight."""
+    b = OneBSDF(bsdf, **kw)
+    u = (dr.arange(mi.Float, n) + 0.5) / n
+    rng = mi.PCG32(n)
+    bs = b.sample(wi, rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32()))
+    w = np.array(bs.weight)
+    del u
+    return w.mean(axis=1), w.max(axis=1)
