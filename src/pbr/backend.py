@@ -140,4 +140,4 @@ class VariantStruct(type):
 
     @property
     def DRJIT_STRUCT(cls):
-        return {k: getattr(mi, v) for k, v in cls._fields.items()}
+        return {k: (getattr(mi, v) if isinstance(v, str) else v) for k, v in cls._fields.items()}

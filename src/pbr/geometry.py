@@ -132,7 +132,9 @@ class Geometry:
     def intersect(self, ray: mi.Ray3f, active):
         """(surface interaction, pbr shape index) of the closest hit."""
         pi = self.mi_scene.ray_intersect_preliminary(ray, False, active)
-        si = pi.compute_surface_interaction(ray, mi.RayFlags.Minimal | mi.RayFlags.UV | mi.RayFlags.ShadingFrame, active)
+        # RayFlags.All is Mitsuba's default (uv, dp/du, shading frame; no normal partials):
+        # the shading frame's tangent follows dp/du, which anisotropic BSDFs rely on.
+        si = pi.compute_surface_interaction(ray, mi.RayFlags.All, active)
         shape = pi.shape_index if self._identity else dr.gather(mi.UInt32, self.to_pbr_shape, pi.shape_index, active)
         return si, shape
 

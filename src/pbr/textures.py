@@ -301,6 +301,13 @@ def _table_from_pairs(wl: np.ndarray, vals: np.ndarray, where: str) -> np.ndarra
     return np.where((grid >= wl[0]) & (grid <= wl[-1]), np.interp(grid, wl, vals), 0.0)
 
 
+def add_tabulated(loader, wavelengths, values, path: str) -> int:
+    """A texture slot for a tabulated spectrum (piecewise linear between samples)."""
+    slot = loader.textures.add(ConstantSpectrum(BASE_TABLE, table=_table_from_pairs(wavelengths, values, path)))
+    loader.textures.items[slot].path = path.split(".", 1)[1] if path.startswith("scene.") else path
+    return slot
+
+
 def load_spectrum(loader, value, path: str, emitter: bool, unbounded: bool = False) -> int:
     """Turn a Mitsuba spectrum-valued parameter into a texture slot (see ``_load``); the
     texture remembers its key path for :func:`pbr.traverse` (``red.reflectance``)."""

@@ -12,8 +12,13 @@ import mitsuba as mi
 
 from .base import BSDFSample, BSDFType, ShadingContext  # noqa: F401
 from .diffuse import Diffuse
+from .conductor import Conductor, RoughConductor
 
-BSDF_TYPES: dict[str, type] = {"diffuse": Diffuse}
+BSDF_TYPES: dict[str, type] = {
+    "diffuse": Diffuse,
+    "conductor": Conductor,
+    "roughconductor": RoughConductor,
+}
 
 
 class BSDFSet:
@@ -30,9 +35,10 @@ class BSDFSet:
         self.entries.append((t, local))
         return len(self.entries) - 1
 
-    def build(self) -> None:
+    def build(self, textures) -> None:
         self.order = list(self.families)
         for f in self.families.values():
+            f.textures = textures
             f.build()
         self.family_of = mi.UInt32([self.order.index(t) for t, _ in self.entries])
         self.local_of = mi.UInt32([i for _, i in self.entries])
@@ -46,7 +52,7 @@ class BSDFSet:
         if len(fams) == 1:
             return getattr(fams[0], method)(ctx, local, *args, active)
         fam = dr.gather(mi.UInt32, self.family_of, bsdf_id, active)
-        return dr.switch(fam, [getattr(f, method) for f in fams], ctx, local, *args, active)
+        return dr.switch(fam, [_typed(getattr(f, method)) for f in fams], ctx, local, *args, active)
 
     def eval_pdf(self, bsdf_id, ctx, wo, active):
         return self._dispatch("eval_pdf", bsdf_id, ctx, active, wo)
@@ -56,3 +62,21 @@ class BSDFSet:
 
     def eval_pdf_sample(self, bsdf_id, ctx, wo, u1, u2, active):
         return self._dispatch("eval_pdf_sample", bsdf_id, ctx, active, wo, u1, u2)
+
+
+def _typed(fn):
+    """Wrap a family method so that every family returns identical types (``dr.switch``
+    requires it): spectra as ``mi.Spectrum``, densities as ``mi.Float``."""
+    def cast(v):
+        if isinstance(v, BSDFSample):
+            return BSDFSample(mi.Vector3f(v.wo), mi.Float(v.pdf), mi.Float(v.eta), mi.Bool(v.delta),
+                              mi.Spectrum(v.weight))
+        if isinstance(v, tuple):
+            return tuple(cast(x) for x in v)
+        if dr.size_v(v) == 4:
+            return mi.Spectrum(v)
+        return mi.Float(v)
+
+    def wrapped(*args):
+        return cast(fn(*args))
+    return wrapped

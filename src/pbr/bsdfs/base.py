@@ -15,6 +15,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..backend import VariantStruct
+from ..spectrum import SampledWavelengths
 
 # Lobe flags (Python ints: a kernel only contains code for flags a scene has).
 REFLECTION, TRANSMISSION, DIFFUSE, GLOSSY, SPECULAR = 1, 2, 4, 8, 16
@@ -34,12 +35,18 @@ class BSDFSample(metaclass=VariantStruct):
         self.weight = weight if weight is not None else mi.Spectrum(0)
 
 
-class ShadingContext:
+class ShadingContext(metaclass=VariantStruct):
     """What a BSDF needs at a hit: the Mitsuba surface interaction (``si.wi`` local,
-    ``si.uv``), the sampled wavelengths and the scene's textures."""
+    ``si.uv``) and the sampled wavelengths. A Dr.Jit struct, so that ``dr.switch`` can
+    pass it to the families; ``textures`` is kept for callers but families use their own
+    reference (set by ``BSDFSet.build``)."""
 
-    def __init__(self, si, wl, textures):
-        self.si, self.wl, self.textures = si, wl, textures
+    _fields = {"si": "SurfaceInteraction3f", "wl": SampledWavelengths}
+
+    def __init__(self, si=None, wl=None, textures=None):
+        self.si = si if si is not None else mi.SurfaceInteraction3f()
+        self.wl = wl if wl is not None else SampledWavelengths()
+        self.textures = textures
 
 
 class BSDFType:
@@ -54,6 +61,8 @@ class BSDFType:
     def add(self, loader, props) -> int:
         """Parse one instance from ``props`` (a :class:`Props`) and return its index."""
         raise NotImplementedError
+
+    textures = None  # the scene's TextureSet, set by BSDFSet.build
 
     def build(self) -> None:
         """(Re)build the Dr.Jit parameter table from the instances."""

@@ -25,7 +25,7 @@ class Scene:
     def build(self) -> None:
         """(Re)build every parameter table from the current parameter values."""
         self.textures.build()
-        self.bsdfs.build()
+        self.bsdfs.build(self.textures)
         self.lights.build(self, self.integrator.light_sampler)
 
     @property

@@ -1,0 +1,145 @@
+"""``conductor`` (smooth mirror) and ``roughconductor`` (microfacet) metals.
+
+The complex IOR eta + i k is given per wavelength: ``material`` names a measured metal
+(Mitsuba's data files ``data/ior/<name>.{eta,k}.spd``, e.g. Au, Ag, Al, Cu, Cr; 'none'
+is a perfect mirror), or ``eta``/``k`` are given as spectra (rgb values use the unbounded
+upsampling). ``specular_reflectance`` scales the result (not physical; default 1).
+"""
+
+from __future__ import annotations
+
+import os
+
+import drjit as dr
+import mitsuba as mi
+
+from ..spectrum import read_spd
+from ..textures import add_tabulated, load_spectrum
+from .base import BSDFType, BSDFSample, REFLECTION, GLOSSY, SPECULAR
+from .fresnel import fresnel_conductor, reflect, reflect_about
+from .microfacet import Microfacet, GGX, BECKMANN
+
+_IOR_DIR = os.path.join(os.path.dirname(mi.__file__), "data", "ior")
+
+
+def conductor_materials() -> list[str]:
+    """Names accepted by ``material`` (those with both eta and k data), plus 'none'."""
+    names = {f.split(".")[0] for f in os.listdir(_IOR_DIR) if f.endswith(".eta.spd")}
+    return sorted(n for n in names if os.path.exists(os.path.join(_IOR_DIR, f"{n}.k.spd"))) + ["none"]
+
+
+def _load_eta_k(loader, props):
+    """Texture slots (eta, k) from ``material`` or explicit ``eta``/``k``."""
+    has_ek = props.has("eta") or props.has("k")
+    material = props.string("material", "none" if has_ek else "none")
+    if has_ek:
+        if props.has("material"):
+            raise props.error("material", "give either 'material' or 'eta'/'k', not both")
+        eta = load_spectrum(loader, props.raw("eta", 0.0), props.key("eta"), emitter=False, unbounded=True)
+        k = load_spectrum(loader, props.raw("k", 1.0), props.key("k"), emitter=False, unbounded=True)
+        return eta, k
+    if material == "none":
+        return (load_spectrum(loader, 0.0, props.key("eta"), emitter=False),
+                load_spectrum(loader, 1.0, props.key("k"), emitter=False))
+    if material not in conductor_materials():
+        raise props.error("material", f"unknown conductor {material!r}; known: {', '.join(conductor_materials())}")
+    slots = []
+    for comp in ("eta", "k"):
+        wl, vals = read_spd(os.path.join(_IOR_DIR, f"{material}.{comp}.spd"))
+        slots.append(add_tabulated(loader, wl, vals, props.key(comp)))
+    return tuple(slots)
+
+
+class Conductor(BSDFType):
+    name = "conductor"
+    flags = REFLECTION | SPECULAR
+
+    def add(self, loader, props) -> int:
+        eta, k = _load_eta_k(loader, props)
+        spec = load_spectrum(loader, props.raw("specular_reflectance", 1.0), props.key("specular_reflectance"),
+                             emitter=False)
+        props.finish()
+        self.instances.append((eta, k, spec))
+        return len(self.instances) - 1
+
+    def build(self) -> None:
+        self.eta, self.k, self.spec = (mi.UInt32([i[j] for i in self.instances]) for j in range(3))
+
+    def _reflectance(self, ctx, idx, cos_i, active):
+        tex, uv, lam = self.textures, ctx.si.uv, ctx.wl.lambda_
+        ev = lambda t: tex.eval(dr.gather(mi.UInt32, t, idx, active), uv, lam, active, illuminant=False)  # noqa: E731
+        return fresnel_conductor(cos_i, ev(self.eta), ev(self.k)) * ev(self.spec)
+
+    def eval_pdf(self, ctx, idx, wo, active):
+        return mi.Spectrum(0.0), mi.Float(0.0)
+
+    def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
+        wi = ctx.si.wi
+        ok = active & (wi.z > 0)
+        w = self._reflectance(ctx, idx, wi.z, ok)
+        return BSDFSample(reflect(wi), dr.select(ok, 1.0, 0.0), mi.Float(1.0), mi.Bool(True), dr.select(ok, w, 0.0))
+
+
+class RoughConductor(Conductor):
+    name = "roughconductor"
+    flags = REFLECTION | GLOSSY
+
+    def add(self, loader, props) -> int:
+        dist = props.string("distribution", BECKMANN, choices=(BECKMANN, GGX))
+        if props.has("alpha") and (props.has("alpha_u") or props.has("alpha_v")):
+            raise props.error("alpha", "give either 'alpha' or 'alpha_u'/'alpha_v'")
+        au = props.raw("alpha_u", props.raw("alpha", 0.1))
+        av = props.raw("alpha_v", props.raw("alpha", 0.1) if not props.has("alpha_u") else au)
+        au = load_spectrum(loader, au, props.key("alpha_u" if props.has("alpha_u") else "alpha"), emitter=False)
+        av = load_spectrum(loader, av, props.key("alpha_v" if props.has("alpha_v") else "alpha"), emitter=False)
+        visible = props.bool("sample_visible", True)
+        i = super().add(loader, props)
+        self.instances[i] = self.instances[i] + (au, av)
+        self.dist = getattr(self, "dist", dist)
+        self.visible = getattr(self, "visible", visible)
+        if (dist, visible) != (self.dist, self.visible):
+            # One kernel variant per family: mixed settings use the first instance's.
+            raise props.error("distribution", "all roughconductor instances of a scene must share "
+                                              "'distribution' and 'sample_visible' (for now)")
+        return i
+
+    def build(self) -> None:
+        super().build()
+        self.au = mi.UInt32([i[3] for i in self.instances])
+        self.av = mi.UInt32([i[4] for i in self.instances])
+
+    def _distribution(self, ctx, idx, active):
+        tex, uv, lam = self.textures, ctx.si.uv, ctx.wl.lambda_
+        a = lambda t: tex.eval(dr.gather(mi.UInt32, t, idx, active), uv, lam, active, illuminant=False)[0]  # noqa: E731
+        return Microfacet(self.dist, a(self.au), a(self.av), self.visible)
+
+    def eval_pdf(self, ctx, idx, wo, active):
+        wi = ctx.si.wi
+        ok = active & (wi.z > 0) & (wo.z > 0)
+        md = self._distribution(ctx, idx, ok)
+        m = dr.normalize(wi + wo)
+        D, G = md.D(m), md.G(wi, wo, m)
+        F = self._reflectance(ctx, idx, dr.dot(wi, m), ok)
+        f = F * (D * G / (4.0 * wi.z))
+        pdf = md.pdf(wi, m) / (4.0 * dr.dot(wo, m))
+        ok &= (pdf > 0) & dr.isfinite(pdf)
+        return dr.select(ok, f, 0.0), dr.select(ok, pdf, 0.0)
+
+    def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
+        wi = ctx.si.wi
+        ok = active & (wi.z > 0)
+        md = self._distribution(ctx, idx, ok)
+        m, pdf_m = md.sample(wi, u2)
+        wo = reflect_about(wi, m)
+        ok &= (wo.z > 0) & (pdf_m > 0) & (dr.dot(wi, m) > 0)
+        pdf = pdf_m / (4.0 * dr.dot(wo, m))
+        F = self._reflectance(ctx, idx, dr.dot(wi, m), ok)
+        if md.sample_visible:
+            w = F * md.G1(wo, m)
+        else:
+            w = F * (md.G(wi, wo, m) * dr.dot(wi, m) / (wi.z * m.z))
+        ok &= dr.isfinite(pdf)
+        return BSDFSample(wo, dr.select(ok, pdf, 0.0), mi.Float(1.0), mi.Bool(False), dr.select(ok, w, 0.0))
+
+    def eval_pdf_sample(self, ctx, idx, wo, u1, u2, active):
+        return BSDFType.eval_pdf_sample(self, ctx, idx, wo, u1, u2, active)
