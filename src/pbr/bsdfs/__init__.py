@@ -13,11 +13,13 @@ import mitsuba as mi
 from .base import BSDFSample, BSDFType, ShadingContext  # noqa: F401
 from .diffuse import Diffuse
 from .conductor import Conductor, RoughConductor
+from .plastic import Plastic
 
 BSDF_TYPES: dict[str, type] = {
     "diffuse": Diffuse,
     "conductor": Conductor,
     "roughconductor": RoughConductor,
+    "plastic": Plastic,
 }
 
 

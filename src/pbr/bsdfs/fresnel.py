@@ -94,3 +94,28 @@ IOR_TABLE = {
     "pyrex": 1.470, "acrylic glass": 1.49, "polypropylene": 1.49, "bk7": 1.5046,
     "sodium chloride": 1.544, "amber": 1.55, "pet": 1.5750, "diamond": 2.419,
 }
+
+
+def fresnel_diffuse_reflectance(eta: float) -> float:
+    """Hemispherical average of the dielectric Fresnel reflectance for light arriving
+    from the side of relative IOR ``eta`` (fits by Egan & Hilgeman 1973 for eta < 1 and
+    d'Eon & Irving 2011 otherwise, the same fits Mitsuba uses)."""
+    inv = 1.0 / eta
+    if eta < 1.0:
+        return 0.0636 * inv + eta * (eta * -1.4399 + 0.7099) + 0.6681
+    c = (0.919317, -3.4793, 6.75335, -7.80989, 4.98554, -1.36881)
+    return sum(ci * inv ** i for i, ci in enumerate(c))
+
+
+def lookup_ior(props, name: str, default):
+    """A float IOR from a number or a name in :data:`IOR_TABLE` (error names the key)."""
+    v = props.raw(name, default)
+    if isinstance(v, str):
+        key = v.lower()
+        if key not in IOR_TABLE:
+            raise props.error(name, f"unknown IOR name {v!r}; known: {', '.join(IOR_TABLE)}")
+        return IOR_TABLE[key]
+    ior = props.float(name, default)
+    if ior <= 0:
+        raise props.error(name, f"an index of refraction must be positive, got {ior}")
+    return ior
