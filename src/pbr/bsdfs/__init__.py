@@ -14,12 +14,14 @@ from .base import BSDFSample, BSDFType, ShadingContext  # noqa: F401
 from .diffuse import Diffuse
 from .conductor import Conductor, RoughConductor
 from .plastic import Plastic
+from .null import Null, pass_through
 
 BSDF_TYPES: dict[str, type] = {
     "diffuse": Diffuse,
     "conductor": Conductor,
     "roughconductor": RoughConductor,
     "plastic": Plastic,
+    "null": Null,
 }
 
 
@@ -27,27 +29,44 @@ NO_BACK = 0xFFFFFFFF
 
 
 class BSDFSet:
-    """All BSDFs of a scene. Entry ``i`` is (family, index in family, back entry).
+    """All BSDFs of a scene. Entry ``i`` is (family, index in family, back entry, opacity).
 
-    ``twosided`` (Mitsuba's) is not a family: its entry is the front BSDF's, with a back
-    entry (the second nested BSDF, or the front one again). Where the incident direction
-    lies below the surface, the dispatcher mirrors both directions through the surface
-    and uses the back entry."""
+    ``twosided`` and ``mask`` (Mitsuba's) are not families but entry attributes:
+    ``twosided`` keeps the front BSDF's entry with a back entry (the second nested BSDF, or
+    the front one again); where the incident direction lies below the surface the
+    dispatcher mirrors both directions and uses the back entry. ``mask`` adds an opacity
+    texture: with probability 1 - opacity light passes straight through (``null``)."""
 
     def __init__(self):
         self.families: dict[str, BSDFType] = {}
-        self.entries: list[tuple[str, int, int]] = []
+        self.entries: list[tuple[str, int, int, int]] = []
 
     def add(self, loader, props) -> int:
         t = props.type
         if t == "twosided":
             return self._add_twosided(loader, props)
+        if t == "mask":
+            return self._add_mask(loader, props)
         if t not in BSDF_TYPES:
             raise props.error(None, f"unsupported BSDF type {t!r} "
                                     f"(supported: {', '.join(sorted(list(BSDF_TYPES) + ['twosided']))})")
         fam = self.families.setdefault(t, BSDF_TYPES[t]())
         local = fam.add(loader, props)
-        self.entries.append((t, local, NO_BACK))
+        self.entries.append((t, local, NO_BACK, NO_BACK))
+        return len(self.entries) - 1
+
+    def _add_mask(self, loader, props) -> int:
+        from ..textures import load_spectrum
+        nested = [k for k, v in props.children() if k != "opacity"]
+        if len(nested) != 1:
+            raise props.error(None, f"mask takes exactly one nested BSDF, got {len(nested)}")
+        opacity = load_spectrum(loader, props.raw("opacity", 0.5), props.key("opacity"), emitter=False)
+        inner = loader.bsdf(props.raw(nested[0]), props.key(nested[0]))
+        props.finish()
+        fam, local, back, op = self.entries[inner]
+        if op != NO_BACK:
+            raise props.error(nested[0], "a mask cannot contain another mask")
+        self.entries.append((fam, local, back, opacity))
         return len(self.entries) - 1
 
     def _add_twosided(self, loader, props) -> int:
@@ -60,8 +79,8 @@ class BSDFSet:
             if self.entries[i][2] != NO_BACK:
                 raise props.error(k, "a twosided BSDF cannot contain another twosided BSDF")
         front, back = ids[0], ids[-1]
-        fam, local, _ = self.entries[front]
-        self.entries.append((fam, local, back))
+        fam, local, _, opacity = self.entries[front]
+        self.entries.append((fam, local, back, opacity))
         return len(self.entries) - 1
 
     def build(self, textures) -> None:
@@ -69,10 +88,13 @@ class BSDFSet:
         for f in self.families.values():
             f.textures = textures
             f.build()
-        self.family_of = mi.UInt32([self.order.index(t) for t, _, _ in self.entries])
-        self.local_of = mi.UInt32([i for _, i, _ in self.entries])
-        self.back_of = mi.UInt32([b for _, _, b in self.entries])
-        self.twosided = any(b != NO_BACK for _, _, b in self.entries)
+        self.textures = textures
+        self.family_of = mi.UInt32([self.order.index(t) for t, _, _, _ in self.entries])
+        self.local_of = mi.UInt32([i for _, i, _, _ in self.entries])
+        self.back_of = mi.UInt32([b for _, _, b, _ in self.entries])
+        self.opacity_of = mi.UInt32([o for _, _, _, o in self.entries])
+        self.twosided = any(b != NO_BACK for _, _, b, _ in self.entries)
+        self.masked = any(o != NO_BACK for _, _, _, o in self.entries)
 
     def has_flag(self, flag: int) -> bool:
         return any(f.flags & flag for f in self.families.values())
@@ -95,26 +117,46 @@ class BSDFSet:
         si.wi = _flip(si.wi, flip)
         return dr.select(flip, back, bsdf_id), ShadingContext(si, ctx.wl), flip
 
+    def _opacity(self, bsdf_id, ctx, active):
+        """Opacity of masked entries (1 elsewhere), or None if the scene has no mask."""
+        if not self.masked:
+            return None
+        slot = dr.gather(mi.UInt32, self.opacity_of, bsdf_id, active)
+        has = active & (slot != NO_BACK)
+        o = self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, has, illuminant=False)[0]
+        return dr.select(has, dr.clip(o, 0.0, 1.0), 1.0)
+
     def eval_pdf(self, bsdf_id, ctx, wo, active):
+        opacity = self._opacity(bsdf_id, ctx, active)
         bsdf_id, ctx, flip = self._side(bsdf_id, ctx, active)
         if flip is not None:
             wo = _flip(wo, flip)
-        return self._dispatch("eval_pdf", bsdf_id, ctx, active, wo)
+        f, pdf = self._dispatch("eval_pdf", bsdf_id, ctx, active, wo)
+        if opacity is not None:
+            f, pdf = f * opacity, pdf * opacity
+        return f, pdf
 
     def sample(self, bsdf_id, ctx, u1, u2, active) -> BSDFSample:
-        bsdf_id, ctx, flip = self._side(bsdf_id, ctx, active)
-        bs = self._dispatch("sample", bsdf_id, ctx, active, u1, u2)
-        if flip is not None:
-            bs.wo = _flip(bs.wo, flip)
-        return bs
+        return self.eval_pdf_sample(bsdf_id, ctx, mi.Vector3f(0, 0, 1), u1, u2, active)[2]
 
     def eval_pdf_sample(self, bsdf_id, ctx, wo, u1, u2, active):
+        opacity = self._opacity(bsdf_id, ctx, active)
+        wi_world_side = ctx.si.wi
+        if opacity is not None:
+            # Pass straight through with probability 1 - opacity; reuse u1 otherwise.
+            through = u1 >= opacity
+            u1 = dr.select(through, u1, u1 / dr.maximum(opacity, 1e-12))
         bsdf_id, ctx, flip = self._side(bsdf_id, ctx, active)
         if flip is not None:
             wo = _flip(wo, flip)
         f, pdf, bs = self._dispatch("eval_pdf_sample", bsdf_id, ctx, active, wo, u1, u2)
         if flip is not None:
             bs.wo = _flip(bs.wo, flip)
+        if opacity is not None:
+            f, pdf = f * opacity, pdf * opacity
+            bs.pdf = bs.pdf * opacity
+            null = pass_through(wi_world_side, 1.0 - opacity, active & through)
+            bs = dr.select(through, _cast(null), _cast(bs))
         return f, pdf, bs
 
 
@@ -123,19 +165,21 @@ def _flip(v, mask):
     return mi.Vector3f(v.x, v.y, dr.select(mask, -v.z, v.z))
 
 
-def _typed(fn):
-    """Wrap a family method so that every family returns identical types (``dr.switch``
-    requires it): spectra as ``mi.Spectrum``, densities as ``mi.Float``."""
-    def cast(v):
-        if isinstance(v, BSDFSample):
-            return BSDFSample(mi.Vector3f(v.wo), mi.Float(v.pdf), mi.Float(v.eta), mi.Bool(v.delta),
-                              mi.Spectrum(v.weight))
-        if isinstance(v, tuple):
-            return tuple(cast(x) for x in v)
-        if dr.size_v(v) == 4:
-            return mi.Spectrum(v)
-        return mi.Float(v)
+def _cast(v):
+    """Identical types for values of any family (``dr.switch``/``dr.select`` need them):
+    spectra as ``mi.Spectrum``, densities as ``mi.Float``."""
+    if isinstance(v, BSDFSample):
+        return BSDFSample(mi.Vector3f(v.wo), mi.Float(v.pdf), mi.Float(v.eta), mi.Bool(v.delta),
+                          mi.Spectrum(v.weight))
+    if isinstance(v, tuple):
+        return tuple(_cast(x) for x in v)
+    if dr.size_v(v) == 4:
+        return mi.Spectrum(v)
+    return mi.Float(v)
 
+
+def _typed(fn):
+    """Wrap a family method so that every family returns identical types."""
     def wrapped(*args):
-        return cast(fn(*args))
+        return _cast(fn(*args))
     return wrapped

@@ -1,0 +1,32 @@
+"""``null``: an index-matched interface that lets light pass straight through (a Dirac
+delta in the forward direction with unit weight). It marks medium boundaries and cut-out
+(``mask``) regions."""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from .base import BSDFType, BSDFSample, TRANSMISSION, SPECULAR
+
+
+def pass_through(wi, pdf, active) -> BSDFSample:
+    """A forward-scattering delta sample of unit weight."""
+    return BSDFSample(-wi, dr.select(active, pdf, 0.0), mi.Float(1.0), mi.Bool(True),
+                      dr.select(active, mi.Spectrum(1.0), 0.0))
+
+
+class Null(BSDFType):
+    name = "null"
+    flags = TRANSMISSION | SPECULAR
+
+    def add(self, loader, props) -> int:
+        props.finish()
+        self.instances.append(None)
+        return len(self.instances) - 1
+
+    def eval_pdf(self, ctx, idx, wo, active):
+        return mi.Spectrum(0.0), mi.Float(0.0)
+
+    def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
+        return pass_through(ctx.si.wi, mi.Float(1.0), active)
