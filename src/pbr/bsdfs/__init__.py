@@ -12,12 +12,16 @@ import mitsuba as mi
 
 from .base import BSDFSample, BSDFType, ShadingContext  # noqa: F401
 from .diffuse import Diffuse
+from .dielectric import RoughDielectric, SmoothDielectric, ThinDielectric
 from .conductor import Conductor, RoughConductor
 from .plastic import Plastic
 from .null import Null, pass_through
 
 BSDF_TYPES: dict[str, type] = {
     "diffuse": Diffuse,
+    "dielectric": SmoothDielectric,
+    "thindielectric": ThinDielectric,
+    "roughdielectric": RoughDielectric,
     "conductor": Conductor,
     "roughconductor": RoughConductor,
     "plastic": Plastic,

@@ -111,7 +111,7 @@ def lookup_ior(props, name: str, default):
     """A float IOR from a number or a name in :data:`IOR_TABLE` (error names the key)."""
     v = props.raw(name, default)
     if isinstance(v, str):
-        key = v.lower()
+        key = v.strip().lower()
         if key not in IOR_TABLE:
             raise props.error(name, f"unknown IOR name {v!r}; known: {', '.join(IOR_TABLE)}")
         return IOR_TABLE[key]

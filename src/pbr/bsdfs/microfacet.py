@@ -92,6 +92,6 @@ class Microfacet:
             else:
                 tan2 = a2 * u.x / dr.maximum(1.0 - u.x, 1e-30)
             cos_t = dr.rsqrt(1.0 + tan2)
-            sin_t = dr.safe_sqrt(1.0 - cos_t * cos_t)
+            sin_t = dr.sqrt(tan2) * cos_t  # not sqrt(1 - cos^2): that rounds to 0 for tiny alpha
             m = mi.Vector3f(sin_t * cphi, sin_t * sphi, cos_t)
         return m, self.pdf(wi, m)

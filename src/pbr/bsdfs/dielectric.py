@@ -1,0 +1,293 @@
+"""Dielectric interfaces, as Mitsuba 3's plugins of the same names and parameters:
+``dielectric`` (smooth), ``thindielectric`` (a thin slab) and ``roughdielectric``
+(Walter et al.'s microfacet refraction model).
+
+Conventions (Mitsuba's): ``eta = int_ior / ext_ior``; the shading normal (+z) points to
+the exterior, so ``wi.z < 0`` means the path arrives from inside. ``BSDFSample.eta`` is
+the relative IOR crossed along the path (``eta_it``, 1 for reflection). Weights and
+values are for radiance transport (paths traced from the camera): crossing into a
+medium of relative IOR ``eta_it`` scales radiance by ``1 / eta_it^2``, so transmitted
+weights carry that factor and ``weight * eta_it^2`` is the energy that crossed.
+
+The optional ``specular_reflectance`` / ``specular_transmittance`` textures are only
+evaluated in kernels of families where some instance sets them.
+"""
+
+from __future__ import annotations
+
+import numbers
+
+import drjit as dr
+import mitsuba as mi
+
+from ..textures import load_spectrum
+from .base import BSDFSample, BSDFType, GLOSSY, REFLECTION, SPECULAR, TRANSMISSION
+from .fresnel import fresnel_dielectric, lookup_ior, reflect, reflect_about, refract, refract_about
+from .microfacet import BECKMANN, GGX, Microfacet
+
+_NO_TEXTURE = 0xFFFFFFFF
+
+
+def _eta(props, rough: bool) -> float:
+    int_ior, ext_ior = lookup_ior(props, "int_ior", "bk7"), lookup_ior(props, "ext_ior", "air")
+    if rough and int_ior == ext_ior:
+        # The half vector of refraction is undefined for index-matched interfaces.
+        raise props.error("int_ior", f"must differ from ext_ior for a rough interface (both are {int_ior})")
+    return int_ior / ext_ior
+
+
+class _Dielectric(BSDFType):
+    """Shared parsing and parameter tables: eta and the two optional spectral scales."""
+
+    _rough = False   # rough interfaces need int_ior != ext_ior
+
+    def _add_common(self, loader, props, inst: dict) -> None:
+        inst["eta"] = _eta(props, self._rough)
+        for name in ("specular_reflectance", "specular_transmittance"):
+            inst[name] = (load_spectrum(loader, props.raw(name), props.key(name), emitter=False)
+                          if props.has(name) else None)
+
+    def add(self, loader, props) -> int:
+        inst: dict = {}
+        self._add_common(loader, props, inst)
+        props.finish()
+        self.instances.append(inst)
+        return len(self.instances) - 1
+
+    def build(self) -> None:
+        self.eta = mi.Float([i["eta"] for i in self.instances])
+        self.tex = {}
+        for name in ("specular_reflectance", "specular_transmittance"):
+            slots = [i[name] for i in self.instances]
+            if any(s is not None for s in slots):
+                # (slot table, whether some instance lacks the texture)
+                self.tex[name] = (mi.UInt32([_NO_TEXTURE if s is None else s for s in slots]),
+                                  any(s is None for s in slots))
+
+    def _scale(self, name, ctx, idx, active):
+        """The spectral scale ``name`` (1 where an instance does not set it), or None when
+        no instance of the family sets it (nothing to multiply)."""
+        if name not in self.tex:
+            return None
+        table, some_missing = self.tex[name]
+        slot = dr.gather(mi.UInt32, table, idx, active)
+        if not some_missing:
+            return self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, active, illuminant=False)
+        has = slot != _NO_TEXTURE
+        v = self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, active & has, illuminant=False)
+        return dr.select(has, v, 1.0)
+
+    def _lobe_weight(self, ctx, idx, sel_r, w_r, w_t, active):
+        """Spectral weight: scalar ``w_r`` on reflected lanes, ``w_t`` on transmitted
+        ones, each times its optional texture (looked up only on its own lanes)."""
+        r = self._scale("specular_reflectance", ctx, idx, active & sel_r)
+        t = self._scale("specular_transmittance", ctx, idx, active & ~sel_r)
+        w_r = mi.Spectrum(w_r) if r is None else w_r * r
+        w_t = mi.Spectrum(w_t) if t is None else w_t * t
+        return dr.select(sel_r, w_r, w_t)
+
+    def eval_pdf(self, ctx, idx, wo, active):
+        """Delta lobes: zero for every direction that was not sampled."""
+        n = dr.width(wo)
+        return dr.zeros(mi.Spectrum, n), dr.zeros(mi.Float, n)
+
+
+class SmoothDielectric(_Dielectric):
+    """``dielectric``: a smooth interface; reflection with probability R (Fresnel),
+    refraction otherwise (total internal reflection included: R = 1)."""
+
+    name = "dielectric"
+    flags = REFLECTION | TRANSMISSION | SPECULAR
+
+    def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
+        wi = ctx.si.wi
+        eta = dr.gather(mi.Float, self.eta, idx, active)
+        r, cos_t, eta_it, eta_ti = fresnel_dielectric(wi.z, eta)
+        sel_r = u1 < r
+        wo = dr.select(sel_r, reflect(wi), refract(wi, cos_t, eta_ti))
+        # Lobe choice in proportion to R / (1 - R) makes the Fresnel factor cancel.
+        weight = self._lobe_weight(ctx, idx, sel_r, 1.0, eta_ti * eta_ti, active)
+        pdf = dr.select(sel_r, r, 1.0 - r)
+        return BSDFSample(wo, dr.select(active, pdf, 0.0), dr.select(sel_r, 1.0, eta_it), mi.Bool(True),
+                          dr.select(active & (pdf > 0), weight, 0.0))
+
+
+class ThinDielectric(_Dielectric):
+    """``thindielectric``: a thin slab with two parallel interfaces (a window pane).
+    Inter-reflections inside the slab sum to R' = 2R / (1 + R); light that gets
+    through leaves undeviated (wo = -wi), so no IOR is crossed and no scaling applies."""
+
+    name = "thindielectric"
+    flags = REFLECTION | TRANSMISSION | SPECULAR
+
+    def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
+        wi = ctx.si.wi
+        eta = dr.gather(mi.Float, self.eta, idx, active)
+        r = fresnel_dielectric(dr.abs(wi.z), eta)[0]
+        r = 2.0 * r / (1.0 + r)
+        sel_r = u1 < r
+        wo = dr.select(sel_r, reflect(wi), -wi)
+        weight = self._lobe_weight(ctx, idx, sel_r, 1.0, 1.0, active)
+        pdf = dr.select(sel_r, r, 1.0 - r)
+        return BSDFSample(wo, dr.select(active, pdf, 0.0), mi.Float(1.0), mi.Bool(True),
+                          dr.select(active & (pdf > 0), weight, 0.0))
+
+
+class RoughDielectric(_Dielectric):
+    """``roughdielectric``: microfacet reflection and refraction (Walter et al. 2007).
+
+    A microfacet normal m is sampled (visible normals for GGX when ``sample_visible``;
+    D(m) cos(theta_m) otherwise, with Walter's roughness widening 1.2 - 0.2 sqrt|cos_i|
+    that tames the weights, as Mitsuba), then reflection or refraction about m is chosen
+    with probability F(wi.m) or 1 - F. ``eval_pdf`` recovers m as the generalised half
+    vector and returns the same density, including the half-vector Jacobians."""
+
+    name = "roughdielectric"
+    flags = REFLECTION | TRANSMISSION | GLOSSY
+    _rough = True
+
+    def add(self, loader, props) -> int:
+        inst: dict = {}
+        dist = props.string("distribution", BECKMANN).lower()
+        if dist not in (BECKMANN, GGX):
+            raise props.error("distribution", f"expected 'beckmann' or 'ggx', got {dist!r}")
+        visible = props.bool("sample_visible", True)
+        # Visible-normal sampling is implemented for GGX; Beckmann samples D cos (the
+        # same expectation as Mitsuba's visible Beckmann sampling, more variance).
+        inst["variant"] = (dist, visible and dist == GGX)
+        if props.has("alpha_u") or props.has("alpha_v"):
+            for k in ("alpha_u", "alpha_v"):
+                if not props.has(k):
+                    raise props.error(k, "both 'alpha_u' and 'alpha_v' must be given")
+            if props.has("alpha"):
+                raise props.error("alpha", "give either 'alpha' or 'alpha_u'/'alpha_v', not both")
+            names = ("alpha_u", "alpha_v")
+        else:
+            names = ("alpha",)
+        slots = []
+        for k in names:
+            v = props.raw(k, 0.1)
+            if isinstance(v, numbers.Real) and not isinstance(v, bool) and v < 0:
+                raise props.error(k, f"roughness must be >= 0, got {v}")
+            slots.append(load_spectrum(loader, v, props.key(k), emitter=False, unbounded=True))
+        inst["alpha"] = (slots[0], slots[-1])
+        self._add_common(loader, props, inst)
+        props.finish()
+        self.instances.append(inst)
+        return len(self.instances) - 1
+
+    def build(self) -> None:
+        super().build()
+        self.variants = sorted({i["variant"] for i in self.instances})
+        self.variant_of = mi.UInt32([self.variants.index(i["variant"]) for i in self.instances])
+        self.anisotropic = any(i["alpha"][0] != i["alpha"][1] for i in self.instances)
+        self.alpha_u = mi.UInt32([i["alpha"][0] for i in self.instances])
+        self.alpha_v = mi.UInt32([i["alpha"][1] for i in self.instances])
+
+    # -- per-hit parameters ----------------------------------------------------------
+    def _params(self, ctx, idx, active):
+        """(eta, alpha_u, alpha_v, variant index or None) at this hit."""
+        eta = dr.gather(mi.Float, self.eta, idx, active)
+        uv, lam = ctx.si.uv, ctx.wl.lambda_
+        au = self.textures.eval(dr.gather(mi.UInt32, self.alpha_u, idx, active), uv, lam, active, illuminant=False)[0]
+        av = (self.textures.eval(dr.gather(mi.UInt32, self.alpha_v, idx, active), uv, lam, active, illuminant=False)[0]
+              if self.anisotropic else au)
+        var = dr.gather(mi.UInt32, self.variant_of, idx, active) if len(self.variants) > 1 else None
+        return eta, au, av, var
+
+    @staticmethod
+    def _distributions(variant, au, av, cos_i):
+        """(distribution, the one sampled from): widened for D cos sampling."""
+        kind, visible = variant
+        d = Microfacet(kind, au, av, visible)
+        if visible:
+            return d, d
+        s = 1.2 - 0.2 * dr.sqrt(dr.abs(cos_i))
+        return d, Microfacet(kind, au * s, av * s, False)
+
+    def _per_variant(self, var, fn):
+        """``fn(variant)`` for the family's only variant, or selected per lane."""
+        if var is None:
+            return fn(self.variants[0])
+        out = None
+        for k, v in enumerate(self.variants):
+            r = fn(v)
+            out = r if out is None else tuple(dr.select(var == k, a, b) for a, b in zip(r, out))
+        return out
+
+    # -- kernels ---------------------------------------------------------------------
+    def _eval_pdf(self, ctx, idx, prm, wo, active):
+        eta, au, av, var = prm
+        wi = ctx.si.wi
+        cos_i, cos_o = wi.z, wo.z
+        is_r = cos_i * cos_o > 0
+        eta_io = dr.select(cos_i > 0, eta, dr.rcp(eta))      # eta_t / eta_i across the macro-surface
+        m = dr.normalize(wi + wo * dr.select(is_r, 1.0, eta_io))
+        m = dr.mulsign(m, m.z)
+        d_i, d_o = dr.dot(wi, m), dr.dot(wo, m)
+        # Both directions on the side of m their macro-surface side implies (else G = 0).
+        ok = active & (cos_i != 0) & (d_i * cos_i > 0) & (d_o * cos_o > 0)
+        f = fresnel_dielectric(d_i, eta)[0]
+        sel = dr.select(is_r, f, 1.0 - f)
+        den_t = d_i + eta_io * d_o
+
+        def micro(variant):
+            d, sd = self._distributions(variant, au, av, cos_i)
+            return d.D(m) * d.G(wi, wo, m), sd.pdf(dr.mulsign(wi, cos_i), m)
+
+        dg, pdf_m = self._per_variant(var, micro)
+        # f|cos_o|: F D G / (4 |cos_i|) for reflection; for refraction
+        # (1-F) D G |d_i d_o| eta^2 / (|cos_i| den^2) times the radiance scale 1/eta^2.
+        val = dr.select(is_r, 0.25, dr.abs(d_i * d_o) / (den_t * den_t)) * sel * dg / dr.abs(cos_i)
+        jac = dr.select(is_r, 0.25 / dr.abs(d_o), eta_io * eta_io * dr.abs(d_o) / (den_t * den_t))
+        pdf = pdf_m * sel * jac
+        ok &= dr.isfinite(val) & dr.isfinite(pdf)
+        value = self._lobe_weight(ctx, idx, is_r, val, val, ok)
+        return dr.select(ok, value, 0.0), dr.select(ok, pdf, 0.0)
+
+    def _sample(self, ctx, idx, prm, u1, u2, active) -> BSDFSample:
+        eta, au, av, var = prm
+        wi = ctx.si.wi
+        cos_i = wi.z
+        active = active & (cos_i != 0)
+        wi_up = dr.mulsign(wi, cos_i)
+
+        def sample_m(variant):
+            return self._distributions(variant, au, av, cos_i)[1].sample(wi_up, u2)
+
+        m, pdf_m = self._per_variant(var, sample_m)
+        d_i = dr.dot(wi, m)
+        f, cos_t, eta_it, eta_ti = fresnel_dielectric(d_i, eta)
+        sel_r = u1 < f
+        wo = dr.select(sel_r, reflect_about(wi, m), refract_about(wi, m, cos_t, eta_ti))
+        d_o = dr.dot(wo, m)
+        den_t = d_i + eta_it * d_o
+        jac = dr.select(sel_r, 0.25 / dr.abs(d_o), eta_it * eta_it * dr.abs(d_o) / (den_t * den_t))
+        pdf = pdf_m * dr.select(sel_r, f, 1.0 - f) * jac
+
+        def weight(variant):
+            d, sd = self._distributions(variant, au, av, cos_i)
+            if variant[1]:
+                # D G1(wi) |wi.m| / |cos_i| cancels against the visible-normal density.
+                return (d.G1(wo, m),)
+            return (d.G(wi, wo, m) * dr.abs(d_i) / (dr.abs(cos_i) * m.z) * (d.D(m) / sd.D(m)),)
+
+        (w,) = self._per_variant(var, weight)
+        # The lobe the sample claims must match its side of the surface (m may send a
+        # reflection below the horizon); such samples fail (pdf 0), as eval_pdf agrees.
+        ok = (active & dr.select(sel_r, wo.z * cos_i > 0, wo.z * cos_i < 0)
+              & (d_i * cos_i > 0) & (d_o * wo.z > 0) & (pdf > 0) & dr.isfinite(pdf) & dr.isfinite(w))
+        spec = self._lobe_weight(ctx, idx, sel_r, w, w * eta_ti * eta_ti, ok)
+        return BSDFSample(wo, dr.select(ok, pdf, 0.0), dr.select(sel_r, 1.0, eta_it), mi.Bool(False),
+                          dr.select(ok, spec, 0.0))
+
+    def eval_pdf(self, ctx, idx, wo, active):
+        return self._eval_pdf(ctx, idx, self._params(ctx, idx, active), wo, active)
+
+    def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
+        return self._sample(ctx, idx, self._params(ctx, idx, active), u1, u2, active)
+
+    def eval_pdf_sample(self, ctx, idx, wo, u1, u2, active):
+        prm = self._params(ctx, idx, active)
+        f, pdf = self._eval_pdf(ctx, idx, prm, wo, active)
+        return f, pdf, self._sample(ctx, idx, prm, u1, u2, active)
