@@ -44,6 +44,7 @@ class BSDFSet:
     def __init__(self):
         self.families: dict[str, BSDFType] = {}
         self.entries: list[tuple[str, int, int, int]] = []
+        self.blend_of: dict[int, tuple[int, int, int]] = {}   # blend entry -> (a, b, weight slot)
 
     def add(self, loader, props) -> int:
         t = props.type
@@ -51,12 +52,33 @@ class BSDFSet:
             return self._add_twosided(loader, props)
         if t == "mask":
             return self._add_mask(loader, props)
+        if t in ("blendbsdf", "mix"):
+            return self._add_blend(loader, props)
         if t not in BSDF_TYPES:
             raise props.error(None, f"unsupported BSDF type {t!r} "
                                     f"(supported: {', '.join(sorted(list(BSDF_TYPES) + ['twosided']))})")
         fam = self.families.setdefault(t, BSDF_TYPES[t]())
         local = fam.add(loader, props)
         self.entries.append((t, local, NO_BACK, NO_BACK))
+        return len(self.entries) - 1
+
+    def _add_blend(self, loader, props) -> int:
+        """Mitsuba's ``blendbsdf`` (``weight``, two nested BSDFs) / pbrt-v4's ``mix``
+        (``amount``): f = (1 - w) f_0 + w f_1."""
+        from ..textures import load_spectrum
+        wkey = "weight" if props.type == "blendbsdf" else "amount"
+        nested = [k for k, v in props.children() if k != wkey]
+        if len(nested) != 2:
+            raise props.error(None, f"{props.type} takes exactly two nested BSDFs, got {len(nested)}")
+        weight = load_spectrum(loader, props.raw(wkey, 0.5), props.key(wkey), emitter=False)
+        ids = [loader.bsdf(props.raw(k), props.key(k)) for k in nested]
+        props.finish()
+        for i, k in zip(ids, nested):
+            if i in self.blend_of:
+                raise props.error(k, f"a {props.type} cannot contain another blend")
+        # A blend entry points at its first component (used where it is not a blend).
+        self.entries.append(self.entries[ids[0]])
+        self.blend_of[len(self.entries) - 1] = (ids[0], ids[1], weight)
         return len(self.entries) - 1
 
     def _add_mask(self, loader, props) -> int:
@@ -98,6 +120,12 @@ class BSDFSet:
         self.back_of = mi.UInt32([b for _, _, b, _ in self.entries])
         self.opacity_of = mi.UInt32([o for _, _, _, o in self.entries])
         self.twosided = any(b != NO_BACK for _, _, b, _ in self.entries)
+        n = len(self.entries)
+        blend = [self.blend_of.get(i, (i, i, NO_BACK)) for i in range(n)]
+        self.blend_a = mi.UInt32([x[0] for x in blend])
+        self.blend_b = mi.UInt32([x[1] for x in blend])
+        self.blend_w = mi.UInt32([x[2] for x in blend])
+        self.blends = bool(self.blend_of)
         self.masked = any(o != NO_BACK for _, _, _, o in self.entries)
 
     def has_flag(self, flag: int) -> bool:
@@ -130,7 +158,7 @@ class BSDFSet:
         o = self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, has, illuminant=False)[0]
         return dr.select(has, dr.clip(o, 0.0, 1.0), 1.0)
 
-    def eval_pdf(self, bsdf_id, ctx, wo, active):
+    def _entry_eval_pdf(self, bsdf_id, ctx, wo, active):
         opacity = self._opacity(bsdf_id, ctx, active)
         bsdf_id, ctx, flip = self._side(bsdf_id, ctx, active)
         if flip is not None:
@@ -140,10 +168,7 @@ class BSDFSet:
             f, pdf = f * opacity, pdf * opacity
         return f, pdf
 
-    def sample(self, bsdf_id, ctx, u1, u2, active) -> BSDFSample:
-        return self.eval_pdf_sample(bsdf_id, ctx, mi.Vector3f(0, 0, 1), u1, u2, active)[2]
-
-    def eval_pdf_sample(self, bsdf_id, ctx, wo, u1, u2, active):
+    def _entry_eval_pdf_sample(self, bsdf_id, ctx, wo, u1, u2, active):
         opacity = self._opacity(bsdf_id, ctx, active)
         wi_world_side = ctx.si.wi
         if opacity is not None:
@@ -161,6 +186,55 @@ class BSDFSet:
             bs.pdf = bs.pdf * opacity
             null = pass_through(wi_world_side, 1.0 - opacity, active & through)
             bs = dr.select(through, _cast(null), _cast(bs))
+        return f, pdf, bs
+
+    # -- public interface: handles blends over the entry-level methods above --------------
+    def _blend(self, bsdf_id, ctx, active):
+        """(component a, component b, weight of b, is-blend mask) per lane."""
+        slot = dr.gather(mi.UInt32, self.blend_w, bsdf_id, active)
+        is_blend = active & (slot != NO_BACK)
+        w = self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, is_blend, illuminant=False)[0]
+        a = dr.select(is_blend, dr.gather(mi.UInt32, self.blend_a, bsdf_id, is_blend), bsdf_id)
+        b = dr.gather(mi.UInt32, self.blend_b, bsdf_id, is_blend)
+        return a, b, dr.select(is_blend, dr.clip(w, 0.0, 1.0), 0.0), is_blend
+
+    def eval_pdf(self, bsdf_id, ctx, wo, active):
+        """(f |cos theta_o|, pdf) of entry ``bsdf_id`` for local direction ``wo``."""
+        if not self.blends:
+            return self._entry_eval_pdf(bsdf_id, ctx, wo, active)
+        a, b, w, is_blend = self._blend(bsdf_id, ctx, active)
+        fa, pa = self._entry_eval_pdf(a, ctx, wo, active)
+        fb, pb = self._entry_eval_pdf(b, ctx, wo, is_blend)
+        return dr.fma(w, fb - fa, fa), dr.fma(w, pb - pa, pa)
+
+    def sample(self, bsdf_id, ctx, u1, u2, active) -> BSDFSample:
+        return self.eval_pdf_sample(bsdf_id, ctx, mi.Vector3f(0, 0, 1), u1, u2, active)[2]
+
+    def eval_pdf_sample(self, bsdf_id, ctx, wo, u1, u2, active):
+        """``eval_pdf(wo)`` and a sampled direction at once. For a blend, one component is
+        sampled (chosen with its weight) but a non-delta sample reports the mixture's pdf
+        and f / pdf, so that MIS sees the density the direction really has."""
+        if not self.blends:
+            return self._entry_eval_pdf_sample(bsdf_id, ctx, wo, u1, u2, active)
+        a, b, w, is_blend = self._blend(bsdf_id, ctx, active)
+        take_b = is_blend & (u1 < w)
+        u1 = dr.select(is_blend, dr.select(take_b, u1 / dr.maximum(w, 1e-12), (u1 - w) / dr.maximum(1.0 - w, 1e-12)), u1)
+        chosen = dr.select(take_b, b, a)
+        f, pdf, bs = self._entry_eval_pdf_sample(chosen, ctx, wo, u1, u2, active)
+        # eval toward wo: the other component as well.
+        other = dr.select(take_b, a, b)
+        fo, po = self._entry_eval_pdf(other, ctx, wo, is_blend)
+        wc = dr.select(take_b, w, 1.0 - w)
+        f = dr.select(is_blend, wc * f + (1.0 - wc) * fo, f)
+        pdf = dr.select(is_blend, wc * pdf + (1.0 - wc) * po, pdf)
+        # The sampled direction: mixture density and weight unless the lobe was a delta.
+        mix = is_blend & ~bs.delta & (bs.pdf > 0)
+        f_c = bs.weight * bs.pdf
+        f2, p2 = self._entry_eval_pdf(other, ctx, bs.wo, mix)
+        p_mix = wc * bs.pdf + (1.0 - wc) * p2
+        f_mix = wc * f_c + (1.0 - wc) * f2
+        bs.weight = dr.select(mix, f_mix / dr.maximum(p_mix, 1e-30), bs.weight)
+        bs.pdf = dr.select(mix, p_mix, dr.select(is_blend, bs.pdf * wc, bs.pdf))
         return f, pdf, bs
 
 

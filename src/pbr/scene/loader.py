@@ -16,7 +16,7 @@ from .props import Props, SceneError
 BSDF_LIKE = {"diffuse", "conductor", "roughconductor", "dielectric", "thindielectric", "roughdielectric",
              "plastic", "roughplastic", "twosided", "mask", "blendbsdf", "null", "bumpmap", "normalmap",
              "principled", "principledthin", "coateddiffuse", "coatedconductor", "diffusetransmission",
-             "measured", "hair"}
+             "measured", "hair", "mix"}
 EMITTER_LIKE = {"area", "point", "spot", "projector", "directional", "constant", "envmap", "directionalarea"}
 TEXTURE_LIKE = {"rgb", "spectrum", "blackbody", "d65", "uniform", "checkerboard", "bitmap"}
 

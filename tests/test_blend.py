@@ -1,0 +1,52 @@
+"""blendbsdf (Mitsuba) / mix (pbrt-v4): f = (1 - w) f_0 + w f_1, mixture-consistent sampling."""
+
+import numpy as np
+import pytest
+import mitsuba as mi
+
+import pbr
+from bsdf_harness import OneBSDF, chi2_bsdf, direction, furnace
+from mitsuba_scenes import material_box, compare_with_mitsuba
+
+A = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.3, 0.2]}}
+B = {"type": "roughconductor", "distribution": "ggx", "alpha": 0.25}
+
+
+def test_eval_is_the_weighted_sum():
+    m = OneBSDF({"type": "blendbsdf", "weight": 0.3, "a": A, "b": B})
+    a, b = OneBSDF(A), OneBSDF(B)
+    wi, wo = direction(30, 0), direction(35, 180)
+    fm, pm = (np.array(x) for x in m.eval_pdf(wi, wo))
+    fa, pa = (np.array(x) for x in a.eval_pdf(wi, wo))
+    fb, pb = (np.array(x) for x in b.eval_pdf(wi, wo))
+    assert np.allclose(fm, 0.7 * fa + 0.3 * fb, rtol=1e-5)
+    assert np.allclose(pm, 0.7 * pa + 0.3 * pb, rtol=1e-5)
+
+
+@pytest.mark.parametrize("w", [0.0, 0.3, 0.8])
+def test_chi2_mixture(w):
+    ok, msg = chi2_bsdf({"type": "mix", "amount": w, "a": A, "b": B}, direction(40, 20))
+    assert ok, msg
+
+
+def test_albedo_is_the_weighted_sum():
+    m, _ = furnace({"type": "blendbsdf", "weight": 0.4, "a": A, "b": B}, direction(20), n=1 << 20)
+    a, _ = furnace(A, direction(20), n=1 << 20)
+    b, _ = furnace(B, direction(20), n=1 << 20)
+    assert np.allclose(m, 0.6 * a + 0.4 * b, rtol=5e-3)
+
+
+def test_blend_of_blend_is_rejected():
+    d = pbr.cornell_box(8, 4)
+    d["floor"]["bsdf"] = {"type": "mix", "a": A, "b": {"type": "mix", "a": A, "b": B}}
+    with pytest.raises(pbr.SceneError, match="scene.floor.bsdf.b: a mix cannot contain another blend"):
+        pbr.load_dict(d)
+
+
+def test_matches_mitsuba(scale):
+    d = material_box({"type": "blendbsdf", "weight": 0.35, "a": A, "b": B},
+                     {"type": "blendbsdf", "weight": 0.6, "a": {"type": "dielectric"},
+                      "b": {"type": "diffuse", "reflectance": 0.4}}, scale)
+    res = compare_with_mitsuba(d, scale)
+    print(res.summary())
+    assert res.passed, res.summary()
