@@ -10,7 +10,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .base import BSDFSample, BSDFType, ShadingContext  # noqa: F401
+from .base import BSDFSample, BSDFType, ShadingContext, DIFFUSE, GLOSSY  # noqa: F401
 from .diffuse import Diffuse
 from .dielectric import RoughDielectric, SmoothDielectric, ThinDielectric
 from .conductor import Conductor, RoughConductor
@@ -126,7 +126,20 @@ class BSDFSet:
         self.blend_b = mi.UInt32([x[1] for x in blend])
         self.blend_w = mi.UInt32([x[2] for x in blend])
         self.blends = bool(self.blend_of)
+        # Entries with a non-delta lobe (light sampling is pointless on the others).
+        fam_smooth = {t: bool(f.flags & (DIFFUSE | GLOSSY)) for t, f in self.families.items()}
+        smooth = [fam_smooth[t] for t, _, _, _ in self.entries]
+        for i, (a, b, _) in self.blend_of.items():
+            smooth[i] = smooth[a] or smooth[b]
+        self.smooth_of = mi.Bool(smooth)
+        self.all_smooth = all(smooth)
         self.masked = any(o != NO_BACK for _, _, _, o in self.entries)
+
+    def smooth(self, bsdf_id, active):
+        """True where the entry has a non-delta lobe (worth sampling a light for)."""
+        if self.all_smooth:
+            return mi.Bool(True)
+        return dr.gather(mi.Bool, self.smooth_of, bsdf_id, active)
 
     def has_flag(self, flag: int) -> bool:
         return any(f.flags & flag for f in self.families.values())

@@ -80,8 +80,9 @@ class PathIntegrator(SamplingIntegrator):
             # Next-event estimation: one light sample, MIS-weighted against the BSDF.
             u_light = rng.next_float32()
             u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
-            ls = lights.sample_Li(si, u_light, u_pos, wl, tex, active_next)
-            em = active_next & (ls.pdf > 0)
+            smooth = active_next & bsdfs.smooth(bsdf_id, active_next)
+            ls = lights.sample_Li(si, u_light, u_pos, wl, tex, smooth)
+            em = smooth & (ls.pdf > 0)
             em &= geo.unoccluded(si, ls.p, em)
             wo_em = si.to_local(ls.wi)
             # The BSDF is evaluated toward the light and sampled (to continue the path)
