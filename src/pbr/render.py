@@ -45,6 +45,9 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
         raise ValueError("render: spp must be >= 0")
     if not scene.requires_grad():
         return integrator.render(scene, sensor=sensor, seed=seed, spp=spp, progress=progress)
+    if scene.bsdfs.dispersive:
+        raise NotImplementedError("render: gradients of scenes with dispersive dielectrics (a "
+                                  "wavelength-dependent IOR) are not supported yet")
     if seed_grad == 0:
         seed_grad = seed + 0x9E3779B9 if seed else 0x51ED270B
     spp_grad = spp_grad or spp

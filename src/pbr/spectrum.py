@@ -155,8 +155,9 @@ class SampledWavelengths(metaclass=backend.VariantStruct):
         return self.pdf[1] == 0
 
     def terminate_secondary(self) -> "SampledWavelengths":
-        """Keep only the first wavelength (for wavelength-dependent refraction)."""
-        pdf = mi.Spectrum(self.pdf[0] * N_WAVELENGTHS, 0, 0, 0)
+        """Keep only the first wavelength (after wavelength-dependent refraction). The
+        film averages over the lanes, so the survivor's density is divided by their number."""
+        pdf = mi.Spectrum(self.pdf[0] / N_WAVELENGTHS, 0, 0, 0)
         return SampledWavelengths(self.lambda_, dr.select(self.secondary_terminated(), self.pdf, pdf))
 
 
@@ -273,6 +274,22 @@ def blackbody(lam, temperature: float):
     if isinstance(l, np.ndarray):
         return 1e-9 * c0 / (l ** 5 * (np.exp(c1 / (l * temperature)) - 1.0))
     return 1e-9 * c0 / (l ** 5 * (dr.exp(c1 / (l * temperature)) - 1.0))
+
+
+# Sellmeier coefficients (B1, B2, B3, C1, C2, C3; C in um^2) of optical glasses (Schott data).
+SELLMEIER = {
+    "glass-bk7": (1.03961212, 0.231792344, 1.01046945, 0.00600069867, 0.0200179144, 103.560653),
+    "glass-baf10": (1.5851495, 0.143559385, 1.08521269, 0.00926681282, 0.0424489805, 105.613573),
+    "glass-sf11": (1.73759695, 0.313747346, 1.89878101, 0.013188707, 0.0623068142, 155.23629),
+    "fused-silica": (0.6961663, 0.4079426, 0.8974794, 0.0684043 ** 2, 0.1162414 ** 2, 9.896161 ** 2),
+}
+
+
+def sellmeier_ior(name: str, lam_nm: np.ndarray) -> np.ndarray:
+    """Refractive index of a named glass (:data:`SELLMEIER`) at wavelengths in nm."""
+    b1, b2, b3, c1, c2, c3 = SELLMEIER[name]
+    l2 = (np.asarray(lam_nm, dtype=np.float64) * 1e-3) ** 2
+    return np.sqrt(1.0 + b1 * l2 / (l2 - c1) + b2 * l2 / (l2 - c2) + b3 * l2 / (l2 - c3))
 
 
 def read_spd(path: str) -> tuple[np.ndarray, np.ndarray]:

@@ -141,6 +141,11 @@ class BSDFSet:
             return mi.Bool(True)
         return dr.gather(mi.Bool, self.smooth_of, bsdf_id, active)
 
+    @property
+    def dispersive(self) -> bool:
+        """Whether some BSDF refracts by a wavelength-dependent IOR."""
+        return any(getattr(f, "dispersive", False) for f in self.families.values())
+
     def has_flag(self, flag: int) -> bool:
         return any(f.flags & flag for f in self.families.values())
 
@@ -261,7 +266,7 @@ def _cast(v):
     spectra as ``mi.Spectrum``, densities as ``mi.Float``."""
     if isinstance(v, BSDFSample):
         return BSDFSample(mi.Vector3f(v.wo), mi.Float(v.pdf), mi.Float(v.eta), mi.Bool(v.delta),
-                          mi.Spectrum(v.weight))
+                          mi.Spectrum(v.weight), mi.Bool(v.terminate))
     if isinstance(v, tuple):
         return tuple(_cast(x) for x in v)
     if dr.size_v(v) == 4:

@@ -23,16 +23,20 @@ REFLECTION, TRANSMISSION, DIFFUSE, GLOSSY, SPECULAR = 1, 2, 4, 8, 16
 
 class BSDFSample(metaclass=VariantStruct):
     """A sampled direction: ``wo`` (local), its solid-angle ``pdf``, the relative IOR
-    ``eta`` crossed, whether the lobe was a Dirac delta, and ``weight`` = f cos / pdf."""
+    ``eta`` crossed, whether the lobe was a Dirac delta, ``weight`` = f cos / pdf, and
+    ``terminate``: the direction depends on the wavelength (dispersion), so only the
+    first wavelength may continue (pbrt-v4's TerminateSecondary)."""
 
-    _fields = {"wo": "Vector3f", "pdf": "Float", "eta": "Float", "delta": "Bool", "weight": "Spectrum"}
+    _fields = {"wo": "Vector3f", "pdf": "Float", "eta": "Float", "delta": "Bool", "weight": "Spectrum",
+               "terminate": "Bool"}
 
-    def __init__(self, wo=None, pdf=None, eta=None, delta=None, weight=None):
+    def __init__(self, wo=None, pdf=None, eta=None, delta=None, weight=None, terminate=None):
         self.wo = wo if wo is not None else mi.Vector3f(0)
         self.pdf = pdf if pdf is not None else mi.Float(0)
         self.eta = eta if eta is not None else mi.Float(1)
         self.delta = delta if delta is not None else mi.Bool(False)
         self.weight = weight if weight is not None else mi.Spectrum(0)
+        self.terminate = terminate if terminate is not None else mi.Bool(False)
 
 
 class ShadingContext(metaclass=VariantStruct):

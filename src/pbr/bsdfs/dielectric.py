@@ -20,7 +20,10 @@ import numbers
 import drjit as dr
 import mitsuba as mi
 
-from ..textures import load_spectrum
+import numpy as np
+
+from ..spectrum import LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, sellmeier_ior
+from ..textures import add_tabulated, load_spectrum
 from .base import BSDFSample, BSDFType, GLOSSY, REFLECTION, SPECULAR, TRANSMISSION
 from .fresnel import fresnel_dielectric, lookup_ior, reflect, reflect_about, refract, refract_about
 from .microfacet import BECKMANN, GGX, Microfacet
@@ -28,12 +31,35 @@ from .microfacet import BECKMANN, GGX, Microfacet
 _NO_TEXTURE = 0xFFFFFFFF
 
 
-def _eta(props, rough: bool) -> float:
-    int_ior, ext_ior = lookup_ior(props, "int_ior", "bk7"), lookup_ior(props, "ext_ior", "air")
-    if rough and int_ior == ext_ior:
-        # The half vector of refraction is undefined for index-matched interfaces.
-        raise props.error("int_ior", f"must differ from ext_ior for a rough interface (both are {int_ior})")
-    return int_ior / ext_ior
+def _ior_spectrum(loader, props, name: str, default: str):
+    """An IOR: a float (number or Mitsuba name) or, for dispersion, a texture slot of a
+    wavelength-dependent IOR (a ``spectrum`` dict, or a Sellmeier glass name such as
+    'glass-BK7'). Returns (float or None, slot or None)."""
+    v = props.raw(name, default)
+    if isinstance(v, str) and v.strip().lower() in SELLMEIER:
+        grid = np.arange(int(LAMBDA_MIN), int(LAMBDA_MAX) + 1, dtype=np.float64)
+        return None, add_tabulated(loader, grid, sellmeier_ior(v.strip().lower(), grid), props.key(name))
+    if isinstance(v, dict):
+        if v.get("type") != "spectrum":
+            raise props.error(name, "a wavelength-dependent IOR must be a 'spectrum' (pairs or a file)")
+        return None, load_spectrum(loader, v, props.key(name), emitter=False, unbounded=True)
+    return lookup_ior(props, name, default), None
+
+
+def _eta(loader, props, rough: bool):
+    """(constant relative IOR or None, interior slot, exterior slot)."""
+    ni, si = _ior_spectrum(loader, props, "int_ior", "bk7")
+    ne, se = _ior_spectrum(loader, props, "ext_ior", "air")
+    if si is None and se is None:
+        if rough and ni == ne:
+            # The half vector of refraction is undefined for index-matched interfaces.
+            raise props.error("int_ior", f"must differ from ext_ior for a rough interface (both are {ni})")
+        return ni / ne, _NO_TEXTURE, _NO_TEXTURE
+    if si is None:
+        si = load_spectrum(loader, ni, props.key("int_ior"), emitter=False)
+    if se is None:
+        se = load_spectrum(loader, ne, props.key("ext_ior"), emitter=False)
+    return 1.0, si, se
 
 
 class _Dielectric(BSDFType):
@@ -42,7 +68,7 @@ class _Dielectric(BSDFType):
     _rough = False   # rough interfaces need int_ior != ext_ior
 
     def _add_common(self, loader, props, inst: dict) -> None:
-        inst["eta"] = _eta(props, self._rough)
+        inst["eta"], inst["int_slot"], inst["ext_slot"] = _eta(loader, props, self._rough)
         for name in ("specular_reflectance", "specular_transmittance"):
             inst[name] = (load_spectrum(loader, props.raw(name), props.key(name), emitter=False)
                           if props.has(name) else None)
@@ -56,6 +82,10 @@ class _Dielectric(BSDFType):
 
     def build(self) -> None:
         self.eta = mi.Float([i["eta"] for i in self.instances])
+        self.dispersive = any(i["int_slot"] != _NO_TEXTURE for i in self.instances)
+        if self.dispersive:
+            self.int_slot = mi.UInt32([i["int_slot"] for i in self.instances])
+            self.ext_slot = mi.UInt32([i["ext_slot"] for i in self.instances])
         self.tex = {}
         for name in ("specular_reflectance", "specular_transmittance"):
             slots = [i[name] for i in self.instances]
@@ -63,6 +93,25 @@ class _Dielectric(BSDFType):
                 # (slot table, whether some instance lacks the texture)
                 self.tex[name] = (mi.UInt32([_NO_TEXTURE if s is None else s for s in slots]),
                                   any(s is None for s in slots))
+
+    def _eta_of(self, ctx, idx, active):
+        """Relative IOR per lane; a dispersive instance uses its value at the first
+        wavelength (the one that survives, see ``_terminates``)."""
+        eta = dr.gather(mi.Float, self.eta, idx, active)
+        if not self.dispersive:
+            return eta
+        si = dr.gather(mi.UInt32, self.int_slot, idx, active)
+        disp = active & (si != _NO_TEXTURE)
+        se = dr.gather(mi.UInt32, self.ext_slot, idx, disp)
+        lam = ctx.wl.lambda_
+        ni = self.textures.eval(si, ctx.si.uv, lam, disp, illuminant=False)[0]
+        ne = self.textures.eval(se, ctx.si.uv, lam, disp, illuminant=False)[0]
+        return dr.select(disp, ni / dr.maximum(ne, 1e-6), eta)
+
+    def _terminates(self, idx, active):
+        if not self.dispersive:
+            return mi.Bool(False)
+        return active & (dr.gather(mi.UInt32, self.int_slot, idx, active) != _NO_TEXTURE)
 
     def _scale(self, name, ctx, idx, active):
         """The spectral scale ``name`` (1 where an instance does not set it), or None when
@@ -101,7 +150,7 @@ class SmoothDielectric(_Dielectric):
 
     def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
         wi = ctx.si.wi
-        eta = dr.gather(mi.Float, self.eta, idx, active)
+        eta = self._eta_of(ctx, idx, active)
         r, cos_t, eta_it, eta_ti = fresnel_dielectric(wi.z, eta)
         sel_r = u1 < r
         wo = dr.select(sel_r, reflect(wi), refract(wi, cos_t, eta_ti))
@@ -109,7 +158,7 @@ class SmoothDielectric(_Dielectric):
         weight = self._lobe_weight(ctx, idx, sel_r, 1.0, eta_ti * eta_ti, active)
         pdf = dr.select(sel_r, r, 1.0 - r)
         return BSDFSample(wo, dr.select(active, pdf, 0.0), dr.select(sel_r, 1.0, eta_it), mi.Bool(True),
-                          dr.select(active & (pdf > 0), weight, 0.0))
+                          dr.select(active & (pdf > 0), weight, 0.0), self._terminates(idx, active))
 
 
 class ThinDielectric(_Dielectric):
@@ -122,7 +171,7 @@ class ThinDielectric(_Dielectric):
 
     def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
         wi = ctx.si.wi
-        eta = dr.gather(mi.Float, self.eta, idx, active)
+        eta = self._eta_of(ctx, idx, active)
         r = fresnel_dielectric(dr.abs(wi.z), eta)[0]
         r = 2.0 * r / (1.0 + r)
         sel_r = u1 < r
@@ -187,7 +236,7 @@ class RoughDielectric(_Dielectric):
     # -- per-hit parameters ----------------------------------------------------------
     def _params(self, ctx, idx, active):
         """(eta, alpha_u, alpha_v, variant index or None) at this hit."""
-        eta = dr.gather(mi.Float, self.eta, idx, active)
+        eta = self._eta_of(ctx, idx, active)
         uv, lam = ctx.si.uv, ctx.wl.lambda_
         au = self.textures.eval(dr.gather(mi.UInt32, self.alpha_u, idx, active), uv, lam, active, illuminant=False)[0]
         av = (self.textures.eval(dr.gather(mi.UInt32, self.alpha_v, idx, active), uv, lam, active, illuminant=False)[0]
@@ -279,7 +328,7 @@ class RoughDielectric(_Dielectric):
               & (d_i * cos_i > 0) & (d_o * wo.z > 0) & (pdf > 0) & dr.isfinite(pdf) & dr.isfinite(w))
         spec = self._lobe_weight(ctx, idx, sel_r, w, w * eta_ti * eta_ti, ok)
         return BSDFSample(wo, dr.select(ok, pdf, 0.0), dr.select(sel_r, 1.0, eta_it), mi.Bool(False),
-                          dr.select(ok, spec, 0.0))
+                          dr.select(ok, spec, 0.0), self._terminates(idx, active))
 
     def eval_pdf(self, ctx, idx, wo, active):
         return self._eval_pdf(ctx, idx, self._params(ctx, idx, active), wo, active)

@@ -20,6 +20,7 @@ import mitsuba as mi
 from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
+from ..spectrum import N_WAVELENGTHS
 from .base import SamplingIntegrator, PRIMAL, BACKWARD
 
 
@@ -53,6 +54,8 @@ class PathIntegrator(SamplingIntegrator):
         prev_pdf = mi.Float(1.0)
         prev_delta = mi.Bool(True)
         valid = mi.Bool(False)
+        terminated = mi.Bool(False)
+        dispersive = bsdfs.dispersive
         active = mi.Bool(active)
         ray = mi.Ray3f(ray)
 
@@ -98,6 +101,14 @@ class PathIntegrator(SamplingIntegrator):
 
             if primal:
                 L = L + Le + Ld
+                if dispersive:
+                    # Wavelength-dependent refraction: only the first wavelength goes on,
+                    # standing for all four (pbrt-v4's TerminateSecondary, applied to the
+                    # radiance and throughput instead of the wavelength densities).
+                    term = hit & bs.terminate & ~terminated
+                    L[term] = mi.Spectrum(L[0] * N_WAVELENGTHS, 0.0, 0.0, 0.0)
+                    beta[term] = mi.Spectrum(beta[0] * N_WAVELENGTHS, 0.0, 0.0, 0.0)
+                    terminated |= term
             else:
                 L = L - Le - Ld
                 with dr.resume_grad():
