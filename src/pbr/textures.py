@@ -1,4 +1,5 @@
-"""Spectral textures: constant spectra, ``checkerboard`` and ``bitmap``.
+"""Spectral textures: constant spectra, ``checkerboard``, ``bitmap``, and pbrt-v4's
+``scale`` and ``mix`` combinators.
 
 Every texture of a scene lives in one :class:`TextureSet`. An instance is addressed by a
 *slot*; the set keeps one structure-of-arrays table per kind and a slot -> (kind, index)
@@ -12,8 +13,17 @@ a sigmoid polynomial, or a table resampled at 1 nm (piecewise linear, as Mitsuba
 ``regular``/``irregular`` spectra). Bitmap texels are upsampled per texel and the
 spectra of the 4 nearest texels are interpolated, as in Mitsuba's spectral variants.
 
+Combinators (:class:`Composite`) nest arbitrarily over every kind: pbrt-v4's ``scale``
+(``tex * scale``), ``mix`` (``(1 - amount) tex1 + amount tex2``) and Mitsuba's
+``checkerboard`` whose colours are not constants. A composite is a node of one more table
+(operation and child slots); a kernel evaluates a slot by an unrolled descent of fixed
+depth (the deepest nesting in the scene), where each level evaluates at most three
+children, masked per lane: a scene without composites traces exactly the leaf code.
+
 Parameters (``.value`` of constants, ``.data`` of bitmaps) are Dr.Jit arrays exposed to
 :func:`pbr.traverse`; tables are rebuilt from them, differentiably, on ``update()``.
+Children of combinators get key paths below their parent (``mat.reflectance.tex.data``,
+``mat.reflectance.amount.value``), as nested textures do in ``mi.traverse``.
 """
 
 from __future__ import annotations
@@ -26,7 +36,9 @@ from . import spectrum as spec
 from .scene.props import Props, SceneError
 
 # Slot kinds.
-CONSTANT, CHECKERBOARD, BITMAP = 0, 1, 2
+CONSTANT, CHECKERBOARD, BITMAP, COMPOSITE = 0, 1, 2, 3
+# Composite operations.
+OP_SCALE, OP_MIX, OP_CHECKER = 0, 1, 2
 # Base spectrum of a constant.
 BASE_ONE, BASE_SIGMOID, BASE_TABLE = 0, 1, 2
 
@@ -67,6 +79,19 @@ class Bitmap:
         self.params = {"data": mi.TensorXf(np.ascontiguousarray(rgb, dtype=np.float32))}
 
 
+class Composite:
+    """A combinator node over other slots: ``scale`` (x * m), ``mix`` (x + m (y - x)) or a
+    ``checkerboard`` with non-constant colours (x where the checker pattern of ``to_uv``
+    is even, y elsewhere). Its own parameters are its children's."""
+
+    def __init__(self, op: int, x: int, y: int | None = None, m: int | None = None, to_uv=None):
+        self.op, self.x = op, x
+        self.y = x if y is None else y      # unused children point at a valid slot
+        self.m = x if m is None else m
+        self.to_uv = np.eye(4) if to_uv is None else to_uv
+        self.params = {}
+
+
 class TextureSet:
     """All textures of a scene and their Dr.Jit tables."""
 
@@ -75,19 +100,29 @@ class TextureSet:
         self.constants: list[int] = []  # slots of each kind, in table order
         self.checkers: list[int] = []
         self.bitmaps: list[int] = []
+        self.composites: list[int] = []
         self._cache: dict = {}
 
     # -- building -------------------------------------------------------------------
     def add(self, tex) -> int:
         slot = len(self.items)
         self.items.append(tex)
-        kind = {ConstantSpectrum: self.constants, Checkerboard: self.checkers, Bitmap: self.bitmaps}[type(tex)]
+        kind = {ConstantSpectrum: self.constants, Checkerboard: self.checkers, Bitmap: self.bitmaps,
+                Composite: self.composites}[type(tex)]
         kind.append(slot)
         return slot
 
     def kind_of(self, slot: int) -> int:
         t = type(self.items[slot])
-        return {ConstantSpectrum: CONSTANT, Checkerboard: CHECKERBOARD, Bitmap: BITMAP}[t]
+        return {ConstantSpectrum: CONSTANT, Checkerboard: CHECKERBOARD, Bitmap: BITMAP, Composite: COMPOSITE}[t]
+
+    def depth_of(self, slot: int) -> int:
+        """Nesting depth of combinators below ``slot`` (0 for the plain kinds)."""
+        t = self.items[slot]
+        if not isinstance(t, Composite):
+            return 0
+        kids = {OP_SCALE: (t.x, t.m), OP_MIX: (t.x, t.y, t.m), OP_CHECKER: (t.x, t.y)}[t.op]
+        return 1 + max(self.depth_of(k) for k in kids)
 
     def constant_value(self, slot: int) -> float:
         """A rough scalar magnitude of a constant (for light power estimates)."""
@@ -102,6 +137,14 @@ class TextureSet:
             return t.scale * (1.0 if v is None else float(np.asarray(v).reshape(-1)[0]))
         if isinstance(t, Checkerboard):
             return 0.5 * (self.constant_value(t.color0) + self.constant_value(t.color1))
+        if isinstance(t, Composite):
+            x = self.constant_value(t.x)
+            if t.op == OP_SCALE:
+                return x * self.constant_value(t.m)
+            if t.op == OP_MIX:
+                m = self.constant_value(t.m)
+                return (1.0 - m) * x + m * self.constant_value(t.y)
+            return 0.5 * (x + self.constant_value(t.y))
         return float(np.mean(spec.luminance_rgb(np.moveaxis(np.array(t.params["data"]), -1, 0)[:3])))
 
     def build(self) -> None:
@@ -109,7 +152,7 @@ class TextureSet:
         n = len(self.items)
         kinds = [self.kind_of(s) for s in range(n)]
         index = [0] * n
-        for lst in (self.constants, self.checkers, self.bitmaps):
+        for lst in (self.constants, self.checkers, self.bitmaps, self.composites):
             for i, s in enumerate(lst):
                 index[s] = i
         T = {"slot_kind": mi.UInt32(kinds), "slot_index": mi.UInt32(index)}
@@ -175,6 +218,29 @@ class TextureSet:
             T["b_wrap"] = mi.UInt32([("repeat", "mirror", "clamp").index(b.wrap_mode) for b in bm])
             T["b_d65"] = mi.Bool([b.form == "illuminant" for b in bm])
             T["b_to_uv"] = [mi.Float([b.to_uv[r, k] for b in bm]) for r in range(2) for k in (0, 1, 3)]
+        # Composites: operation and child slots (and the pattern transform of checkers).
+        self.ops, self.depth = set(), 0
+        if self.composites:
+            cp = [self.items[s] for s in self.composites]
+            T["n_op"] = mi.UInt32([c.op for c in cp])
+            T["n_x"] = mi.UInt32([c.x for c in cp])
+            T["n_y"] = mi.UInt32([c.y for c in cp])
+            T["n_m"] = mi.UInt32([c.m for c in cp])
+            self.ops = {c.op for c in cp}
+            if OP_CHECKER in self.ops:
+                T["n_to_uv"] = [mi.Float([c.to_uv[r, k] for c in cp]) for r in range(2) for k in (0, 1, 3)]
+            self.depth = max(self.depth_of(s) for s in self.composites)
+            # Per level d of the descent: the operations of composites of depth <= d and
+            # how deep each child role (x, y, m) nests below them, so that a kernel only
+            # descends where the scene's trees do (one deep chain costs one extra leaf
+            # evaluation per level, not three).
+            self._levels = {}
+            for d in range(1, self.depth + 1):
+                cs = [self.items[s] for s in self.composites if self.depth_of(s) <= d]
+                role = lambda r, ops: max([self.depth_of(getattr(c, r)) for c in cs if c.op in ops],  # noqa: E731
+                                          default=0)
+                self._levels[d] = ({c.op for c in cs}, role("x", (OP_SCALE, OP_MIX, OP_CHECKER)),
+                                   role("y", (OP_MIX, OP_CHECKER)), role("m", (OP_SCALE, OP_MIX)))
         dr.eval(T)
         self.T = T
         self.bases = {c.base for c in consts}
@@ -253,14 +319,52 @@ class TextureSet:
         """Spectrum of texture ``slot`` at surface coordinates ``uv``. Callers that can only
         reach non-illuminant textures (reflectances) pass ``illuminant=False`` to keep
         the D65 lookup out of their kernels."""
-        T = self.T
         slot = mi.UInt32(slot)
+        if not self.composites:
+            return self._eval_leaf(slot, uv, lam, active, illuminant)
+        return self._eval_node(slot, uv, lam, mi.Bool(active), illuminant, self.depth)
+
+    def _eval_node(self, slot, uv, lam, active, illuminant, depth):
+        """Evaluate ``slot`` whose combinator nesting is at most ``depth`` levels: at each
+        level a composite lane evaluates its children one level down, any other lane
+        passes its own (leaf) slot down as the first child."""
+        if depth == 0:
+            return self._eval_leaf(slot, uv, lam, active, illuminant)
+        T = self.T
+        ops, dx, dy, dm = self._levels[depth]
+        comp = active & (dr.gather(mi.UInt32, T["slot_kind"], slot, active) == COMPOSITE)
+        ni = dr.gather(mi.UInt32, T["slot_index"], slot, comp)
+        op = dr.gather(mi.UInt32, T["n_op"], ni, comp) if len(ops) > 1 else mi.UInt32(next(iter(ops)))
+        x_slot = dr.select(comp, dr.gather(mi.UInt32, T["n_x"], ni, comp), slot)
+        x = self._eval_node(x_slot, uv, lam, active, illuminant, dx)
+        result = x
+        if ops & {OP_SCALE, OP_MIX}:
+            uses_m = comp & (op != OP_CHECKER)
+            m = self._eval_node(dr.gather(mi.UInt32, T["n_m"], ni, uses_m), uv, lam, uses_m, illuminant, dm)
+        if ops & {OP_MIX, OP_CHECKER}:
+            uses_y = comp & (op != OP_SCALE)
+            y = self._eval_node(dr.gather(mi.UInt32, T["n_y"], ni, uses_y), uv, lam, uses_y, illuminant, dy)
+        if OP_SCALE in ops:
+            result = dr.select(comp & (op == OP_SCALE), x * m, result)
+        if OP_MIX in ops:
+            result = dr.select(comp & (op == OP_MIX), dr.fma(m, y - x, x), result)
+        if OP_CHECKER in ops:
+            is_ck = comp & (op == OP_CHECKER)
+            st = self._apply_uv(T["n_to_uv"], uv, ni)
+            frac = st - dr.floor(st)
+            second = (frac.x > 0.5) != (frac.y > 0.5)
+            result = dr.select(is_ck & second, y, result)
+        return result
+
+    def _eval_leaf(self, slot, uv, lam, active, illuminant):
+        """A constant, checkerboard (of constants) or bitmap slot."""
+        T = self.T
         if len(self.items) == 1 or not (self.checkers or self.bitmaps):
             kind = mi.UInt32(self.kind_of(0)) if len(self.items) == 1 else mi.UInt32(CONSTANT)
         else:
             kind = dr.gather(mi.UInt32, T["slot_kind"], slot, active)
         # With constants only, slots are constant-table indices already.
-        only_constants = not (self.checkers or self.bitmaps)
+        only_constants = not (self.checkers or self.bitmaps or self.composites)
         idx = slot if only_constants else dr.gather(mi.UInt32, T["slot_index"], slot, active)
         result = mi.Spectrum(0.0)
         if self.constants:
@@ -390,13 +494,31 @@ def _load(loader, value, path: str, emitter: bool, unbounded: bool = False) -> i
     if t == "checkerboard":
         c0 = load_spectrum(loader, p.raw("color0", 0.4), p.key("color0"), emitter, unbounded)
         c1 = load_spectrum(loader, p.raw("color1", 0.2), p.key("color1"), emitter, unbounded)
-        for c, k in ((c0, "color0"), (c1, "color1")):
-            if texs.kind_of(c) != CONSTANT:
-                raise p.error(k, "checkerboard colours must be constant spectra (rgb, spectrum or float)")
         to_uv = p.transform("to_uv")
         p.finish()
-        slot = texs.add(Checkerboard(c0, c1, to_uv))
+        if texs.kind_of(c0) == CONSTANT and texs.kind_of(c1) == CONSTANT:
+            slot = texs.add(Checkerboard(c0, c1, to_uv))
+        else:  # textured colours: a combinator node
+            slot = texs.add(Composite(OP_CHECKER, c0, c1, to_uv=to_uv))
         texs.items[slot].children = {"color0": c0, "color1": c1}
+        return slot
+    if t == "scale":
+        # pbrt-v4's ``scale``: tex * scale. The factor is a plain (unbounded, never
+        # illuminant) spectrum, so that an emitter's scaled radiance carries D65 once.
+        x = load_spectrum(loader, p.raw("tex", 1.0), p.key("tex"), emitter, unbounded)
+        m = load_spectrum(loader, p.raw("scale", 1.0), p.key("scale"), emitter=False, unbounded=True)
+        p.finish()
+        slot = texs.add(Composite(OP_SCALE, x, m=m))
+        texs.items[slot].children = {"tex": x, "scale": m}
+        return slot
+    if t == "mix":
+        # pbrt-v4's ``mix``: (1 - amount) tex1 + amount tex2 (defaults 0, 1 and 0.5).
+        x = load_spectrum(loader, p.raw("tex1", 0.0), p.key("tex1"), emitter, unbounded)
+        y = load_spectrum(loader, p.raw("tex2", 1.0), p.key("tex2"), emitter, unbounded)
+        m = load_spectrum(loader, p.raw("amount", 0.5), p.key("amount"), emitter=False)
+        p.finish()
+        slot = texs.add(Composite(OP_MIX, x, y, m))
+        texs.items[slot].children = {"tex1": x, "tex2": y, "amount": m}
         return slot
     if t == "bitmap":
         from .image import read_image, srgb_to_linear
@@ -427,4 +549,4 @@ def _load(loader, value, path: str, emitter: bool, unbounded: bool = False) -> i
             rgb = np.clip(rgb, 0.0, 1.0)
         return texs.add(Bitmap(rgb, filter_type, wrap_mode, to_uv, form_rgb))
     raise SceneError(f"{path}: unsupported texture/spectrum type {t!r} (supported: rgb, spectrum, blackbody, "
-                     "d65, uniform, checkerboard, bitmap, ref)")
+                     "d65, uniform, checkerboard, bitmap, scale, mix, ref)")

@@ -15,7 +15,9 @@ from .diffuse import Diffuse
 from .dielectric import RoughDielectric, SmoothDielectric, ThinDielectric
 from .conductor import Conductor, RoughConductor
 from .plastic import Plastic
+from .diffusetransmission import DiffuseTransmission
 from .null import Null, pass_through
+from .principled import Principled, PrincipledThin
 
 BSDF_TYPES: dict[str, type] = {
     "diffuse": Diffuse,
@@ -25,7 +27,10 @@ BSDF_TYPES: dict[str, type] = {
     "conductor": Conductor,
     "roughconductor": RoughConductor,
     "plastic": Plastic,
+    "diffusetransmission": DiffuseTransmission,
     "null": Null,
+    "principled": Principled,
+    "principledthin": PrincipledThin,
 }
 
 

@@ -18,7 +18,7 @@ BSDF_LIKE = {"diffuse", "conductor", "roughconductor", "dielectric", "thindielec
              "principled", "principledthin", "coateddiffuse", "coatedconductor", "diffusetransmission",
              "measured", "hair", "mix"}
 EMITTER_LIKE = {"area", "point", "spot", "projector", "directional", "constant", "envmap", "directionalarea"}
-TEXTURE_LIKE = {"rgb", "spectrum", "blackbody", "d65", "uniform", "checkerboard", "bitmap"}
+TEXTURE_LIKE = {"rgb", "spectrum", "blackbody", "d65", "uniform", "checkerboard", "bitmap", "scale"}
 
 
 class Loader:
@@ -137,6 +137,10 @@ class Loader:
                 shape_bsdf.append(b)
                 shape_light.append(light)
                 shape_ids.append(v.get("id", key))
+            elif t == "mix" and ("tex1" in v or "tex2" in v):
+                # pbrt-v4 has both a mix texture (tex1, tex2) and a mix material.
+                from ..textures import load_spectrum
+                load_spectrum(self, v, path, emitter=False)
             elif t in BSDF_LIKE:
                 self.bsdf(v, path)
             elif t in TEXTURE_LIKE:
