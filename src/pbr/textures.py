@@ -28,6 +28,8 @@ Children of combinators get key paths below their parent (``mat.reflectance.tex.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import drjit as dr
 import mitsuba as mi
@@ -218,6 +220,17 @@ class TextureSet:
             T["b_wrap"] = mi.UInt32([("repeat", "mirror", "clamp").index(b.wrap_mode) for b in bm])
             T["b_d65"] = mi.Bool([b.form == "illuminant" for b in bm])
             T["b_to_uv"] = [mi.Float([b.to_uv[r, k] for b in bm]) for r in range(2) for k in (0, 1, 3)]
+            if any(getattr(b, "needs_raw", False) for b in bm):
+                # Raw texel values (normal and bump maps), 3 channels (grey replicated).
+                raws = []
+                for b in bm:
+                    r = getattr(b, "raw_values", None)
+                    r = np.asarray(b.params["data"] if r is None else r, np.float32).reshape(b.height, b.width, -1)
+                    if r.shape[2] == 1:
+                        r = np.repeat(r, 3, axis=2)
+                    raws.append(r[..., :3].reshape(-1, 3))
+                raw = np.concatenate(raws)
+                T["b_raw"] = mi.Array3f(raw[:, 0], raw[:, 1], raw[:, 2])
         # Composites: operation and child slots (and the pattern transform of checkers).
         self.ops, self.depth = set(), 0
         if self.composites:
@@ -314,6 +327,36 @@ class TextureSet:
         if illuminant and self.has_d65:
             v = dr.select(dr.gather(mi.Bool, T["b_d65"], bi, active), v * spec.d65(lam), v)
         return v
+
+    def eval_raw(self, slot, uv, active=True):
+        """Raw 3-channel value of bitmap ``slot`` (no colour processing; normal and bump
+        maps) and its derivatives w.r.t. u and v: (value, d/du, d/dv)."""
+        T = self.T
+        bi = dr.gather(mi.UInt32, T["slot_index"], mi.UInt32(slot), active)
+        size = dr.gather(mi.Array2u, T["b_size"], bi, active)
+        off = dr.gather(mi.UInt32, T["b_offset"], bi, active)
+        wrap = dr.gather(mi.UInt32, T["b_wrap"], bi, active)
+        bil = dr.gather(mi.Bool, T["b_bilinear"], bi, active)
+        A = [dr.gather(mi.Float, a, bi, active) for a in T["b_to_uv"]]
+        st = mi.Point2f(A[0] * uv[0] + A[1] * uv[1] + A[2], A[3] * uv[0] + A[4] * uv[1] + A[5])
+        res = mi.Vector2f(size)
+        p = st * res - dr.select(bil, 0.5, 0.0)
+        p0 = dr.floor(p)
+        w = dr.select(bil, p - p0, 0.0)
+        ip = mi.Vector2i(p0)
+
+        def texel(dx, dy):
+            q = _wrap(mi.Vector2i(ip.x + dx, ip.y + dy), mi.Vector2i(size), wrap)
+            return dr.gather(mi.Array3f, T["b_raw"], off + mi.UInt32(q.y) * size.x + mi.UInt32(q.x), active)
+
+        v00, v10, v01, v11 = texel(0, 0), texel(1, 0), texel(0, 1), texel(1, 1)
+        v0 = dr.fma(w.x, v10 - v00, v00)
+        v1 = dr.fma(w.x, v11 - v01, v01)
+        v = dr.select(bil, dr.fma(w.y, v1 - v0, v0), v00)
+        gs = dr.select(bil, ((1.0 - w.y) * (v10 - v00) + w.y * (v11 - v01)) * res.x, 0.0)
+        gt = dr.select(bil, ((1.0 - w.x) * (v01 - v00) + w.x * (v11 - v10)) * res.y, 0.0)
+        # Chain rule through to_uv (st = A uv + b).
+        return v, A[0] * gs + A[3] * gt, A[1] * gs + A[4] * gt
 
     def eval(self, slot, uv, lam: mi.Spectrum, active=True, illuminant=True) -> mi.Spectrum:
         """Spectrum of texture ``slot`` at surface coordinates ``uv``. Callers that can only
@@ -545,8 +588,15 @@ def _load(loader, value, path: str, emitter: bool, unbounded: bool = False) -> i
         if rgb.ndim == 2:
             rgb = rgb[..., None]
         rgb = rgb[..., :3] if rgb.shape[2] >= 3 else rgb[..., :1]
+        if raw and not p.has("data") and os.path.splitext(fname)[1].lower() in (".png", ".jpg", ".jpeg"):
+            # read_image decodes 8-bit sRGB; raw data (normal/bump maps) keeps the stored values.
+            from .image import linear_to_srgb
+            rgb = linear_to_srgb(rgb).astype(np.float32)
+        raw_values = np.array(rgb, dtype=np.float32)
         if form_rgb == "albedo":
             rgb = np.clip(rgb, 0.0, 1.0)
-        return texs.add(Bitmap(rgb, filter_type, wrap_mode, to_uv, form_rgb))
+        slot = texs.add(Bitmap(rgb, filter_type, wrap_mode, to_uv, form_rgb))
+        texs.items[slot].raw_values = raw_values
+        return slot
     raise SceneError(f"{path}: unsupported texture/spectrum type {t!r} (supported: rgb, spectrum, blackbody, "
                      "d65, uniform, checkerboard, bitmap, scale, mix, ref)")

@@ -17,6 +17,9 @@ from .conductor import Conductor, RoughConductor
 from .plastic import Plastic
 from .diffusetransmission import DiffuseTransmission
 from .null import Null, pass_through
+from . import perturb
+from ..scene.props import SceneError
+from ..spectrum import luminance_rgb
 from .principled import Principled, PrincipledThin
 
 BSDF_TYPES: dict[str, type] = {
@@ -50,6 +53,7 @@ class BSDFSet:
         self.families: dict[str, BSDFType] = {}
         self.entries: list[tuple[str, int, int, int]] = []
         self.blend_of: dict[int, tuple[int, int, int]] = {}   # blend entry -> (a, b, weight slot)
+        self.perturb_of: dict[int, tuple] = {}   # normal/bump-mapped entry -> (kind, slot, scale, flip, shadow)
 
     def add(self, loader, props) -> int:
         t = props.type
@@ -59,6 +63,8 @@ class BSDFSet:
             return self._add_mask(loader, props)
         if t in ("blendbsdf", "mix"):
             return self._add_blend(loader, props)
+        if t in ("normalmap", "bumpmap"):
+            return self._add_perturbed(loader, props)
         if t not in BSDF_TYPES:
             raise props.error(None, f"unsupported BSDF type {t!r} "
                                     f"(supported: {', '.join(sorted(list(BSDF_TYPES) + ['twosided']))})")
@@ -86,6 +92,17 @@ class BSDFSet:
         self.blend_of[len(self.entries) - 1] = (ids[0], ids[1], weight)
         return len(self.entries) - 1
 
+    def _add_perturbed(self, loader, props) -> int:
+        from ..scene.loader import BSDF_LIKE
+        kind, slot, scale, flip, shadow, key = perturb.parse(loader, props, BSDF_LIKE)
+        inner = loader.bsdf(props.raw(key), props.key(key))
+        props.finish()
+        if inner in self.perturb_of or inner in self.blend_of:
+            raise props.error(key, f"a {props.type} cannot wrap another normal/bump map or a blend")
+        self.entries.append(self.entries[inner])
+        self.perturb_of[len(self.entries) - 1] = (kind, slot, scale, flip, shadow)
+        return len(self.entries) - 1
+
     def _add_mask(self, loader, props) -> int:
         from ..textures import load_spectrum
         nested = [k for k, v in props.children() if k != "opacity"]
@@ -98,6 +115,8 @@ class BSDFSet:
         if op != NO_BACK:
             raise props.error(nested[0], "a mask cannot contain another mask")
         self.entries.append((fam, local, back, opacity))
+        if inner in self.perturb_of:
+            self.perturb_of[len(self.entries) - 1] = self.perturb_of[inner]
         return len(self.entries) - 1
 
     def _add_twosided(self, loader, props) -> int:
@@ -112,6 +131,8 @@ class BSDFSet:
         front, back = ids[0], ids[-1]
         fam, local, _, opacity = self.entries[front]
         self.entries.append((fam, local, back, opacity))
+        if front in self.perturb_of:
+            self.perturb_of[len(self.entries) - 1] = self.perturb_of[front]
         return len(self.entries) - 1
 
     def build(self, textures) -> None:
@@ -131,6 +152,17 @@ class BSDFSet:
         self.blend_b = mi.UInt32([x[1] for x in blend])
         self.blend_w = mi.UInt32([x[2] for x in blend])
         self.blends = bool(self.blend_of)
+        pert = [self.perturb_of.get(i, (0, NO_BACK, 0.0, True, True)) for i in range(n)]
+        self.pert_kind = mi.UInt32([x[0] for x in pert])
+        self.pert_slot = mi.UInt32([x[1] for x in pert])
+        self.pert_scale = mi.Float([x[2] for x in pert])
+        kinds = {x[0] for x in self.perturb_of.values()}
+        self.pert_kinds = kinds
+        self.pert_flip = {x[3] for x in self.perturb_of.values()}
+        self.pert_shadow = {x[4] for x in self.perturb_of.values()}
+        if len(self.pert_flip) > 1 or len(self.pert_shadow) > 1:
+            raise SceneError("scene: normal/bump maps of one scene must share flip_invalid_normals "
+                             "and use_shadowing_function (for now)")
         # Entries with a non-delta lobe (light sampling is pointless on the others).
         fam_smooth = {t: bool(f.flags & (DIFFUSE | GLOSSY)) for t, f in self.families.items()}
         smooth = [fam_smooth[t] for t, _, _, _ in self.entries]
@@ -181,12 +213,45 @@ class BSDFSet:
         o = self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, has, illuminant=False)[0]
         return dr.select(has, dr.clip(o, 0.0, 1.0), 1.0)
 
+    def _perturb(self, bsdf_id, ctx, active):
+        """(context in the perturbed frame, local frame, mask) for normal/bump-mapped
+        entries, or None if the scene has none."""
+        if not self.perturb_of:
+            return None
+        kind = dr.gather(mi.UInt32, self.pert_kind, bsdf_id, active)
+        has = active & (kind != 0)
+        slot = dr.gather(mi.UInt32, self.pert_slot, bsdf_id, has)
+        value, du, dv = self.textures.eval_raw(slot, ctx.si.uv, has)
+        flip = next(iter(self.pert_flip))
+        si = mi.SurfaceInteraction3f(ctx.si)
+        frame = mi.Frame3f(mi.Vector3f(1, 0, 0), mi.Vector3f(0, 1, 0), mi.Vector3f(0, 0, 1))
+        if perturb.NORMAL in self.pert_kinds:
+            fn = perturb.normalmap_frame(value, si.wi, flip)
+            frame = dr.select(has & (kind == perturb.NORMAL), fn, frame)
+        if perturb.BUMP in self.pert_kinds:
+            scale = dr.gather(mi.Float, self.pert_scale, bsdf_id, has)
+            lum = lambda g: luminance_rgb(g) * scale  # noqa: E731
+            fb = perturb.bumpmap_frame(si, lum(du), lum(dv), flip)
+            frame = dr.select(has & (kind == perturb.BUMP), fb, frame)
+        si.wi = frame.to_local(ctx.si.wi)
+        return ShadingContext(si, ctx.wl), frame, has
+
     def _entry_eval_pdf(self, bsdf_id, ctx, wo, active):
         opacity = self._opacity(bsdf_id, ctx, active)
         bsdf_id, ctx, flip = self._side(bsdf_id, ctx, active)
         if flip is not None:
             wo = _flip(wo, flip)
-        f, pdf = self._dispatch("eval_pdf", bsdf_id, ctx, active, wo)
+        pert = self._perturb(bsdf_id, ctx, active)
+        if pert is not None:
+            ctx, frame, has = pert
+            wo_p = frame.to_local(wo)
+            ok = ~has | (wo.z * wo_p.z > 0)
+            f, pdf = self._dispatch("eval_pdf", bsdf_id, ctx, active & ok, wo_p)
+            if next(iter(self.pert_shadow)):
+                f = f * dr.select(has, perturb.shadow_terminator(frame.n, wo), 1.0)
+            f, pdf = dr.select(ok, f, 0.0), dr.select(ok, pdf, 0.0)
+        else:
+            f, pdf = self._dispatch("eval_pdf", bsdf_id, ctx, active, wo)
         if opacity is not None:
             f, pdf = f * opacity, pdf * opacity
         return f, pdf
@@ -201,7 +266,26 @@ class BSDFSet:
         bsdf_id, ctx, flip = self._side(bsdf_id, ctx, active)
         if flip is not None:
             wo = _flip(wo, flip)
-        f, pdf, bs = self._dispatch("eval_pdf_sample", bsdf_id, ctx, active, wo, u1, u2)
+        pert = self._perturb(bsdf_id, ctx, active)
+        if pert is not None:
+            ctx, frame, has = pert
+            wo_p = frame.to_local(wo)
+            ok = ~has | (wo.z * wo_p.z > 0)
+            f, pdf, bs = self._dispatch("eval_pdf_sample", bsdf_id, ctx, active, wo_p, u1, u2)
+            shadowing = next(iter(self.pert_shadow))
+            if shadowing:
+                f = f * dr.select(has, perturb.shadow_terminator(frame.n, wo), 1.0)
+            f, pdf = dr.select(ok, f, 0.0), dr.select(ok, pdf, 0.0)
+            wo_s = dr.select(has, frame.to_world(bs.wo), bs.wo)
+            ok_s = ~has | (bs.wo.z * wo_s.z > 0)
+            bs.wo = wo_s
+            w = bs.weight
+            if shadowing:
+                w = w * dr.select(has, perturb.shadow_terminator(frame.n, wo_s), 1.0)
+            bs.weight = dr.select(ok_s, w, 0.0)
+            bs.pdf = dr.select(ok_s, bs.pdf, 0.0)
+        else:
+            f, pdf, bs = self._dispatch("eval_pdf_sample", bsdf_id, ctx, active, wo, u1, u2)
         if flip is not None:
             bs.wo = _flip(bs.wo, flip)
         if opacity is not None:
