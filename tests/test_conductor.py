@@ -115,3 +115,11 @@ def test_matches_mitsuba(small, large, scale):
     res = compare_with_mitsuba(material_box(small, large, scale), scale)
     print(res.summary())
     assert res.passed, res.summary()
+
+
+def test_mixed_distributions_in_one_scene_match_mitsuba(scale):
+    small = {"type": "roughconductor", "distribution": "ggx", "alpha": 0.2, "material": "Ag"}
+    large = {"type": "roughconductor", "distribution": "beckmann", "alpha": 0.3, "material": "Cu"}
+    res = compare_with_mitsuba(material_box(small, large, scale), scale)
+    print(res.summary())
+    assert res.passed, res.summary()

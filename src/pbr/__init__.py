@@ -11,7 +11,7 @@ Public API (see README.md)::
 """
 from .backend import set_backend, get_backend, BackendError  # noqa: F401  (configures libLLVM first)
 from .scene import load_dict, load_file, traverse, SceneError, SceneParameters  # noqa: F401
-from .scenes import cornell_box  # noqa: F401
+from .scenes import cornell_box, materials_gallery  # noqa: F401
 from .render import render  # noqa: F401
 from .image import write_image, read_image, register_ipython_display  # noqa: F401
 

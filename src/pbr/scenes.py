@@ -44,3 +44,65 @@ def cornell_box(resolution: int = 256, spp: int = 64) -> dict:
                       "to_world": T().translate([-0.33, -0.4, -0.28]).rotate([0, 1, 0], 18.25).scale([0.3, 0.61, 0.3]),
                       "bsdf": {"type": "ref", "id": "white"}},
     }
+
+
+# One entry per BSDF family: (label, bsdf dict). Extended as families are added.
+GALLERY_MATERIALS = [
+    ("diffuse", {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.2, 0.2]}}),
+    ("conductor Au", {"type": "conductor", "material": "Au"}),
+    ("roughconductor Cu", {"type": "roughconductor", "material": "Cu", "distribution": "ggx", "alpha": 0.2}),
+    ("anisotropic Al", {"type": "roughconductor", "material": "Al", "distribution": "ggx",
+                        "alpha_u": 0.05, "alpha_v": 0.4}),
+    ("dielectric", {"type": "dielectric", "int_ior": 1.5}),
+    ("dispersive BK7", {"type": "dielectric", "int_ior": "glass-BK7"}),
+    ("thindielectric", {"type": "thindielectric"}),
+    ("roughdielectric", {"type": "roughdielectric", "distribution": "ggx", "alpha": 0.2}),
+    ("plastic", {"type": "plastic", "diffuse_reflectance": {"type": "rgb", "value": [0.1, 0.3, 0.7]}}),
+    ("roughplastic", {"type": "roughplastic", "distribution": "ggx", "alpha": 0.3,
+                      "diffuse_reflectance": {"type": "rgb", "value": [0.8, 0.8, 0.1]}}),
+    ("coateddiffuse", {"type": "coateddiffuse", "reflectance": {"type": "rgb", "value": [0.1, 0.5, 0.6]},
+                       "roughness": 0.05}),
+    ("coatedconductor", {"type": "coatedconductor", "interface.roughness": 0.02, "conductor.roughness": 0.3}),
+    ("principled", {"type": "principled", "base_color": {"type": "rgb", "value": [0.8, 0.5, 0.1]},
+                    "metallic": 0.5, "roughness": 0.3, "clearcoat": 0.5}),
+    ("principledthin", {"type": "principledthin", "base_color": {"type": "rgb", "value": [0.2, 0.7, 0.3]},
+                        "spec_trans": 0.5, "roughness": 0.4}),
+    ("diffusetransmission", {"type": "diffusetransmission", "reflectance": 0.3, "transmittance": 0.5}),
+    ("mask", {"type": "mask", "opacity": 0.5, "b": {"type": "diffuse", "reflectance": 0.8}}),
+    ("blendbsdf", {"type": "blendbsdf", "weight": 0.5, "a": {"type": "diffuse", "reflectance": 0.2},
+                   "b": {"type": "roughconductor", "material": "Ag", "alpha": 0.1}}),
+    ("twosided", {"type": "twosided", "b": {"type": "diffuse", "reflectance":
+                                            {"type": "checkerboard", "to_uv": np.diag([8.0, 8.0, 1.0, 1.0])}}}),
+]
+
+
+def materials_gallery(resolution: int = 480, spp: int = 64, materials=None) -> dict:
+    """A grid of spheres, one per BSDF family (``GALLERY_MATERIALS``), on a diffuse floor
+    under an area light: a Mitsuba-style scene dict."""
+    from .bsdfs import BSDF_TYPES
+    mats = [m for m in (materials or GALLERY_MATERIALS) if m[1]["type"] in BSDF_TYPES or
+            m[1]["type"] in ("twosided", "mask", "blendbsdf", "mix", "normalmap", "bumpmap")]
+    T = mi.ScalarTransform4f
+    cols = 5
+    rows = (len(mats) + cols - 1) // cols
+    d = {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": 12},
+        "sensor": {"type": "perspective", "fov": 40.0,
+                   "to_world": T().look_at(origin=[0, 4.5, 9.5], target=[0, 0.2, 0], up=[0, 1, 0]),
+                   "sampler": {"type": "independent", "sample_count": spp},
+                   "film": {"type": "hdrfilm", "width": resolution, "height": int(resolution * 0.75)}},
+        "floor": {"type": "rectangle", "to_world": T().translate([0, -0.5, 0]).rotate([1, 0, 0], -90).scale(12),
+                  "bsdf": {"type": "diffuse", "reflectance": {"type": "checkerboard",
+                           "color0": 0.6, "color1": 0.3, "to_uv": T().scale([24, 24, 1])}}},
+        "light": {"type": "rectangle", "to_world": T().translate([0, 7, 3]).rotate([1, 0, 0], 110).scale(4),
+                  "emitter": {"type": "area", "radiance": 2.5}},
+        "backlight": {"type": "rectangle", "to_world": T().translate([0, 3, -8]).scale([10, 4, 1]),
+                      "emitter": {"type": "area", "radiance": {"type": "d65", "scale": 0.25}}},
+    }
+    for i, (name, bsdf) in enumerate(mats):
+        r, c = divmod(i, cols)
+        x = (c - (cols - 1) / 2) * 1.3
+        z = (r - (rows - 1) / 2) * 1.4
+        d[f"sphere-{i:02d}"] = {"type": "sphere", "radius": 0.5, "center": [x, 0.0, z], "bsdf": bsdf}
+    return d

@@ -17,7 +17,7 @@ from ..spectrum import read_spd
 from ..textures import add_tabulated, load_spectrum
 from .base import BSDFType, BSDFSample, REFLECTION, GLOSSY, SPECULAR
 from .fresnel import fresnel_conductor, reflect, reflect_about
-from .microfacet import Microfacet, GGX, BECKMANN
+from .microfacet import Microfacet, GGX, BECKMANN, VariantTable
 
 _IOR_DIR = os.path.join(os.path.dirname(mi.__file__), "data", "ior")
 
@@ -92,52 +92,58 @@ class RoughConductor(Conductor):
         av = props.raw("alpha_v", props.raw("alpha", 0.1) if not props.has("alpha_u") else au)
         au = load_spectrum(loader, au, props.key("alpha_u" if props.has("alpha_u") else "alpha"), emitter=False)
         av = load_spectrum(loader, av, props.key("alpha_v" if props.has("alpha_v") else "alpha"), emitter=False)
-        visible = props.bool("sample_visible", True)
+        # Visible-normal sampling exists for GGX only (see Microfacet).
+        visible = props.bool("sample_visible", True) and dist == GGX
         i = super().add(loader, props)
-        self.instances[i] = self.instances[i] + (au, av)
-        self.dist = getattr(self, "dist", dist)
-        self.visible = getattr(self, "visible", visible)
-        if (dist, visible) != (self.dist, self.visible):
-            # One kernel variant per family: mixed settings use the first instance's.
-            raise props.error("distribution", "all roughconductor instances of a scene must share "
-                                              "'distribution' and 'sample_visible' (for now)")
+        self.instances[i] = self.instances[i] + (au, av, (dist, visible))
         return i
 
     def build(self) -> None:
         super().build()
         self.au = mi.UInt32([i[3] for i in self.instances])
         self.av = mi.UInt32([i[4] for i in self.instances])
+        self.variant_table = VariantTable([i[5] for i in self.instances])
 
-    def _distribution(self, ctx, idx, active):
+    def _roughness(self, ctx, idx, active):
         tex, uv, lam = self.textures, ctx.si.uv, ctx.wl.lambda_
         a = lambda t: tex.eval(dr.gather(mi.UInt32, t, idx, active), uv, lam, active, illuminant=False)[0]  # noqa: E731
-        return Microfacet(self.dist, a(self.au), a(self.av), self.visible)
+        return a(self.au), a(self.av), self.variant_table.lane(idx, active)
 
     def eval_pdf(self, ctx, idx, wo, active):
         wi = ctx.si.wi
         ok = active & (wi.z > 0) & (wo.z > 0)
-        md = self._distribution(ctx, idx, ok)
+        au, av, var = self._roughness(ctx, idx, ok)
         m = dr.normalize(wi + wo)
-        D, G = md.D(m), md.G(wi, wo, m)
+
+        def micro(variant):
+            md = Microfacet(variant[0], au, av, variant[1])
+            return md.D(m) * md.G(wi, wo, m), md.pdf(wi, m)
+
+        dg, pdf_m = self.variant_table.per_variant(var, micro)
         F = self._reflectance(ctx, idx, dr.dot(wi, m), ok)
-        f = F * (D * G / (4.0 * wi.z))
-        pdf = md.pdf(wi, m) / (4.0 * dr.dot(wo, m))
+        f = F * (dg / (4.0 * wi.z))
+        pdf = pdf_m / (4.0 * dr.dot(wo, m))
         ok &= (pdf > 0) & dr.isfinite(pdf)
         return dr.select(ok, f, 0.0), dr.select(ok, pdf, 0.0)
 
     def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
         wi = ctx.si.wi
         ok = active & (wi.z > 0)
-        md = self._distribution(ctx, idx, ok)
-        m, pdf_m = md.sample(wi, u2)
+        au, av, var = self._roughness(ctx, idx, ok)
+
+        def micro(variant):
+            md = Microfacet(variant[0], au, av, variant[1])
+            m, pdf_m = md.sample(wi, u2)
+            wo = reflect_about(wi, m)
+            # weight / F: the masking of wo (visible normals) or G (wi.m)/(cos_i m.z) (D cos).
+            g = md.G1(wo, m) if md.sample_visible else md.G(wi, wo, m) * dr.dot(wi, m) / (wi.z * m.z)
+            return m, pdf_m, g
+
+        m, pdf_m, g = self.variant_table.per_variant(var, micro)
         wo = reflect_about(wi, m)
         ok &= (wo.z > 0) & (pdf_m > 0) & (dr.dot(wi, m) > 0)
         pdf = pdf_m / (4.0 * dr.dot(wo, m))
-        F = self._reflectance(ctx, idx, dr.dot(wi, m), ok)
-        if md.sample_visible:
-            w = F * md.G1(wo, m)
-        else:
-            w = F * (md.G(wi, wo, m) * dr.dot(wi, m) / (wi.z * m.z))
+        w = self._reflectance(ctx, idx, dr.dot(wi, m), ok) * g
         ok &= dr.isfinite(pdf)
         return BSDFSample(wo, dr.select(ok, pdf, 0.0), mi.Float(1.0), mi.Bool(False), dr.select(ok, w, 0.0))
 

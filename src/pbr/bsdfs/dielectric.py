@@ -26,7 +26,7 @@ from ..spectrum import LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, sellmeier_ior
 from ..textures import add_tabulated, load_spectrum
 from .base import BSDFSample, BSDFType, GLOSSY, REFLECTION, SPECULAR, TRANSMISSION
 from .fresnel import fresnel_dielectric, lookup_ior, reflect, reflect_about, refract, refract_about
-from .microfacet import BECKMANN, GGX, Microfacet
+from .microfacet import BECKMANN, GGX, Microfacet, VariantTable
 
 _NO_TEXTURE = 0xFFFFFFFF
 
@@ -227,8 +227,7 @@ class RoughDielectric(_Dielectric):
 
     def build(self) -> None:
         super().build()
-        self.variants = sorted({i["variant"] for i in self.instances})
-        self.variant_of = mi.UInt32([self.variants.index(i["variant"]) for i in self.instances])
+        self.variant_table = VariantTable([i["variant"] for i in self.instances])
         self.anisotropic = any(i["alpha"][0] != i["alpha"][1] for i in self.instances)
         self.alpha_u = mi.UInt32([i["alpha"][0] for i in self.instances])
         self.alpha_v = mi.UInt32([i["alpha"][1] for i in self.instances])
@@ -241,8 +240,7 @@ class RoughDielectric(_Dielectric):
         au = self.textures.eval(dr.gather(mi.UInt32, self.alpha_u, idx, active), uv, lam, active, illuminant=False)[0]
         av = (self.textures.eval(dr.gather(mi.UInt32, self.alpha_v, idx, active), uv, lam, active, illuminant=False)[0]
               if self.anisotropic else au)
-        var = dr.gather(mi.UInt32, self.variant_of, idx, active) if len(self.variants) > 1 else None
-        return eta, au, av, var
+        return eta, au, av, self.variant_table.lane(idx, active)
 
     @staticmethod
     def _distributions(variant, au, av, cos_i):
@@ -255,14 +253,7 @@ class RoughDielectric(_Dielectric):
         return d, Microfacet(kind, au * s, av * s, False)
 
     def _per_variant(self, var, fn):
-        """``fn(variant)`` for the family's only variant, or selected per lane."""
-        if var is None:
-            return fn(self.variants[0])
-        out = None
-        for k, v in enumerate(self.variants):
-            r = fn(v)
-            out = r if out is None else tuple(dr.select(var == k, a, b) for a, b in zip(r, out))
-        return out
+        return self.variant_table.per_variant(var, fn)
 
     # -- kernels ---------------------------------------------------------------------
     def _eval_pdf(self, ctx, idx, prm, wo, active):

@@ -95,3 +95,28 @@ class Microfacet:
             sin_t = dr.sqrt(tan2) * cos_t  # not sqrt(1 - cos^2): that rounds to 0 for tiny alpha
             m = mi.Vector3f(sin_t * cphi, sin_t * sphi, cos_t)
         return m, self.pdf(wi, m)
+
+
+class VariantTable:
+    """The (distribution, sample_visible) choices of a rough BSDF family's instances.
+
+    Only the variants a scene uses are traced; when there are several, each is computed
+    and the result selected per lane (``per_variant``)."""
+
+    def __init__(self, variants_per_instance):
+        self.variants = sorted(set(variants_per_instance))
+        self.index = mi.UInt32([self.variants.index(v) for v in variants_per_instance])
+
+    def lane(self, idx, active):
+        """Variant index per lane, or None when the family has one variant."""
+        return dr.gather(mi.UInt32, self.index, idx, active) if len(self.variants) > 1 else None
+
+    def per_variant(self, var, fn):
+        """``fn(variant)`` (a tuple of arrays) for the single variant, or selected per lane."""
+        if var is None:
+            return fn(self.variants[0])
+        out = None
+        for k, v in enumerate(self.variants):
+            r = fn(v)
+            out = r if out is None else type(r)(dr.select(var == k, a, b) for a, b in zip(r, out))
+        return out

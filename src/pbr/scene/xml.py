@@ -505,3 +505,95 @@ def parse_file(path, **kwargs) -> dict:
 def _parse(text, file: str, base_dir: str, kwargs: dict) -> dict:
     """Parse XML text labelled file (for messages) with includes under base_dir."""
     return _Parser(kwargs).parse_root(_read_tree(text, file), base_dir)
+
+
+# ----------------------------------------------------------------------------- writing
+
+def to_xml(d: dict) -> str:
+    """Mitsuba 3 XML for a scene dict (the inverse of :func:`parse_string` for the value
+    kinds it produces: numbers, booleans, strings, 3-vectors, rgb/spectrum/blackbody
+    values, transforms, references and nested objects)."""
+    import numpy as np
+    from xml.sax.saxutils import quoteattr
+
+    def num(v):
+        return repr(float(v)) if not float(v).is_integer() else str(float(v))
+
+    def matrix(v):
+        m = np.array(v.matrix if hasattr(v, "matrix") else v, dtype=np.float64).reshape(4, 4)
+        return " ".join(num(x) for x in m.ravel())
+
+    def prop(name, v, ind):
+        q = quoteattr(name)
+        pad = "    " * ind
+        if isinstance(v, bool):
+            return f'{pad}<boolean name={q} value="{str(v).lower()}"/>'
+        if isinstance(v, int):
+            return f'{pad}<integer name={q} value="{v}"/>'
+        if isinstance(v, float):
+            return f'{pad}<float name={q} value="{num(v)}"/>'
+        if isinstance(v, str):
+            return f"{pad}<string name={q} value={quoteattr(v)}/>"
+        if hasattr(v, "matrix") or (isinstance(v, np.ndarray) and v.size == 16):
+            return f'{pad}<transform name={q}><matrix value="{matrix(v)}"/></transform>'
+        if isinstance(v, (list, tuple, np.ndarray)) and len(v) == 3 and not isinstance(v[0], (list, tuple)):
+            return f'{pad}<point name={q} value="{", ".join(num(x) for x in v)}"/>'
+        if isinstance(v, dict):
+            t = v.get("type")
+            if t == "rgb":
+                val = v["value"]
+                val = [val] * 3 if np.ndim(val) == 0 else val
+                return f'{pad}<rgb name={q} value="{", ".join(num(x) for x in val)}"/>'
+            if t == "spectrum" and "value" in v:
+                val = v["value"]
+                if np.ndim(val) == 0:
+                    return f'{pad}<spectrum name={q} value="{num(val)}"/>'
+                return f'{pad}<spectrum name={q} value="{", ".join(f"{num(a)}:{num(b)}" for a, b in val)}"/>'
+            if t == "ref":
+                return f'{pad}<ref name={q} id={quoteattr(v["id"])}/>'
+            return obj(v, ind, name)
+        raise TypeError(f"to_xml: cannot write parameter {name!r} of type {type(v).__name__}")
+
+    def tag_of(t):
+        from ..bsdfs import BSDF_TYPES
+        from .loader import BSDF_LIKE, EMITTER_LIKE
+        if t in BSDF_TYPES or t in BSDF_LIKE:
+            return "bsdf"
+        if t in EMITTER_LIKE:
+            return "emitter"
+        if t in ("perspective", "thinlens", "orthographic"):
+            return "sensor"
+        if t == "hdrfilm":
+            return "film"
+        if t in ("independent", "stratified", "multijitter"):
+            return "sampler"
+        if t in ("box", "tent", "gaussian"):
+            return "rfilter"
+        if t in ("path", "volpath", "prb", "direct"):
+            return "integrator"
+        if t in ("blackbody", "d65", "uniform"):
+            return "spectrum"
+        if t in ("bitmap", "checkerboard", "scale", "mix"):
+            return "texture"
+        return "shape"
+
+    def obj(v, ind, name=None, oid=None):
+        pad = "    " * ind
+        t = v["type"]
+        attrs = f" type={quoteattr(t)}"
+        if oid is not None:
+            attrs += f" id={quoteattr(oid)}"
+        if name is not None:
+            attrs += f" name={quoteattr(name)}"
+        body = [prop(k, x, ind + 1) for k, x in v.items() if k not in ("type", "id")]
+        if not body:
+            return f"{pad}<{tag_of(t)}{attrs}/>"
+        return "\n".join([f"{pad}<{tag_of(t)}{attrs}>", *body, f"{pad}</{tag_of(t)}>"])
+
+    lines = ['<scene version="3.0.0">']
+    for k, v in d.items():
+        if k == "type":
+            continue
+        lines.append(obj(v, 1, oid=k))
+    lines.append("</scene>")
+    return "\n".join(lines) + "\n"
