@@ -15,6 +15,7 @@ from .diffuse import Diffuse
 from .dielectric import RoughDielectric, SmoothDielectric, ThinDielectric
 from .conductor import Conductor, RoughConductor
 from .plastic import Plastic
+from .roughplastic import RoughPlastic
 from .diffusetransmission import DiffuseTransmission
 from .null import Null, pass_through
 from . import perturb
@@ -30,6 +31,7 @@ BSDF_TYPES: dict[str, type] = {
     "conductor": Conductor,
     "roughconductor": RoughConductor,
     "plastic": Plastic,
+    "roughplastic": RoughPlastic,
     "diffusetransmission": DiffuseTransmission,
     "null": Null,
     "principled": Principled,
