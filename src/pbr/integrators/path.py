@@ -51,6 +51,7 @@ class PathIntegrator(SamplingIntegrator):
         eta = mi.Float(1.0)
         depth = mi.UInt32(0)
         prev_p = mi.Point3f(ray.o)
+        prev_n = mi.Normal3f(0.0)
         prev_pdf = mi.Float(1.0)
         prev_delta = mi.Bool(True)
         valid = mi.Bool(False)
@@ -71,10 +72,18 @@ class PathIntegrator(SamplingIntegrator):
             skip = on_light & (depth == 0) if self.hide_emitters else mi.Bool(False)
             on_light &= ~skip
             with dr.resume_grad(when=not primal):
-                Le = lights.L(light - 1, si, wl, tex, on_light)
-                pdf_light = lights.pdf_Li(light - 1, prev_p, si, on_light & ~prev_delta)
+                Le = lights.L(light - 1, si, wl, on_light)
+                pdf_light = lights.pdf_Li(light - 1, prev_p, prev_n, si, on_light & ~prev_delta)
                 w_hit = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_light))
                 Le = dr.select(on_light, beta * Le * w_hit, 0.0)
+                if lights.has_infinite:
+                    # Rays leaving the scene see the infinite lights (MIS against NEE).
+                    escaped = active & ~si.is_valid()
+                    if self.hide_emitters:
+                        escaped &= depth > 0
+                    for Le_inf, pdf_inf in lights.Le_escaped(ray.d, wl, prev_p, prev_n, escaped):
+                        w_inf = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_inf))
+                        Le += dr.select(escaped, beta * Le_inf * w_inf, 0.0)
 
             active_next = hit & ~skip & (depth + 1 < max_depth)
             ctx = ShadingContext(si, wl, tex)
@@ -84,7 +93,7 @@ class PathIntegrator(SamplingIntegrator):
             u_light = rng.next_float32()
             u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
             smooth = active_next & bsdfs.smooth(bsdf_id, active_next)
-            ls = lights.sample_Li(si, u_light, u_pos, wl, tex, smooth)
+            ls = lights.sample_Li(si, u_light, u_pos, wl, smooth)
             em = smooth & (ls.pdf > 0)
             em &= geo.unoccluded(si, ls.p, em)
             wo_em = si.to_local(ls.wi)
@@ -94,7 +103,7 @@ class PathIntegrator(SamplingIntegrator):
             u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
             with dr.resume_grad(when=not primal):
                 f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, active_next)
-                w_em = power_heuristic(ls.pdf, pdf_em)
+                w_em = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf, pdf_em))
                 Ld = dr.select(em, beta * f_em * ls.L * (w_em / ls.pdf), 0.0)
             bs = dr.detach(bs)
             cont = active_next & (bs.pdf > 0)
@@ -125,6 +134,7 @@ class PathIntegrator(SamplingIntegrator):
             beta[~skip] = beta * bs.weight
             eta[~skip] = eta * bs.eta
             prev_p = mi.Point3f(si.p)
+            prev_n = mi.Normal3f(si.n)
             prev_pdf = mi.Float(bs.pdf)
             prev_delta = skip | bs.delta
             ray = dr.select(skip, si.spawn_ray(ray.d), si.spawn_ray(si.to_world(bs.wo)))

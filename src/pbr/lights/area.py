@@ -16,7 +16,7 @@ from .base import LightType, LightSample
 class AreaLight(LightType):
     name = "area"
 
-    def add(self, loader, props, shape_index: int) -> int:
+    def add(self, loader, props, shape_index=None) -> int:
         slot = load_spectrum(loader, props.raw("radiance", 1.0), props.key("radiance"), emitter=True)
         props.finish()
         self.instances.append({"radiance": slot, "shape": shape_index})
@@ -34,12 +34,12 @@ class AreaLight(LightType):
         area = float(scene.mi_scene.shapes()[inst["shape"]].surface_area()[0])
         return np.pi * area * scene.textures.constant_value(inst["radiance"])
 
-    def L(self, idx, si, wl, textures, active):
+    def L(self, idx, si, wl, active):
         active = active & (si.wi.z > 0)
         slot = dr.gather(mi.UInt32, self.radiance, idx, active)
-        return dr.select(active, textures.eval(slot, si.uv, wl.lambda_, active), 0.0)
+        return dr.select(active, self.textures.eval(slot, si.uv, wl.lambda_, active), 0.0)
 
-    def sample_Li(self, idx, ref, u, wl, textures, active) -> LightSample:
+    def sample_Li(self, idx, ref, u, wl, active) -> LightSample:
         shape = dr.gather(mi.ShapePtr, self.shape_ptrs, dr.gather(mi.UInt32, self.shape_index, idx, active), active)
         ps = shape.sample_position(ref.time, u, active)
         d = ps.p - ref.p
@@ -49,8 +49,8 @@ class AreaLight(LightType):
         active = active & (cos_l > 0) & (ps.pdf > 0)
         pdf = ps.pdf * dist2 / cos_l
         slot = dr.gather(mi.UInt32, self.radiance, idx, active)
-        L = textures.eval(slot, ps.uv, wl.lambda_, active)
-        return LightSample(dr.select(active, L, 0.0), wi, dr.select(active, pdf, 0.0), ps.p)
+        L = self.textures.eval(slot, ps.uv, wl.lambda_, active)
+        return LightSample(dr.select(active, L, 0.0), wi, dr.select(active, pdf, 0.0), ps.p, mi.Bool(False))
 
     def pdf_Li(self, idx, ref_p, si, active):
         """Solid-angle density of reaching hit ``si`` from ``ref_p`` by sampling this light."""

@@ -31,17 +31,21 @@ class LightSampler:
         self._pmf = mi.Float(pmf.astype(np.float32))
         self._cdf = mi.Float(cdf.astype(np.float32))
 
-    def sample(self, u: mi.Float, active=True):
-        """(light index, probability, u re-scaled to [0, 1) for reuse)."""
+    def sample(self, u: mi.Float, ref_p=None, ref_n=None, active=True):
+        """(light index, probability). ``ref_p``/``ref_n`` (the shading point) are unused
+        by these samplers; the BVH sampler's probabilities depend on them."""
         if self.n == 1:
-            return mi.UInt32(0), mi.Float(1.0), u
+            return mi.UInt32(0), mi.Float(1.0)
         idx = dr.binary_search(0, self.n - 1, lambda i: dr.gather(mi.Float, self._cdf, i, active) <= u)
         idx = dr.minimum(idx, self.n - 1)
-        pmf = dr.gather(mi.Float, self._pmf, idx, active)
-        lo = dr.select(idx > 0, dr.gather(mi.Float, self._cdf, dr.maximum(idx, 1) - 1, active & (idx > 0)), 0.0)
-        return idx, pmf, dr.clip((u - lo) / dr.maximum(pmf, 1e-30), 0.0, 0.99999994)
+        return idx, dr.gather(mi.Float, self._pmf, idx, active)
 
-    def pmf(self, idx, active=True):
+    def pmf(self, idx, ref_p=None, ref_n=None, active=True):
         if self.n == 1:
             return mi.Float(1.0)
         return dr.gather(mi.Float, self._pmf, idx, active)
+
+
+def make_light_sampler(kind: str, powers, bounds):
+    """The light sampler named by an integrator's ``light_sampler`` parameter."""
+    return LightSampler(kind, powers)

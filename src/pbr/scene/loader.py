@@ -128,7 +128,7 @@ class Loader:
                         raise p.error(k, f"a shape can only carry an 'area' emitter, got {c['type']!r}")
                     if light:
                         raise p.error(k, "a shape takes at most one emitter")
-                    light = self.lights.area.add(self, Props(c, p.key(k), self), sidx) + 1
+                    light = self.lights.add(self, Props(c, p.key(k), self), sidx) + 1
                 for k in ("interior", "exterior"):
                     if p.has(k):
                         raise p.error(k, "participating media are not supported yet")
@@ -147,7 +147,7 @@ class Loader:
                 from ..textures import load_spectrum
                 load_spectrum(self, v, path, emitter=False)
             elif t in EMITTER_LIKE:
-                raise SceneError(f"{path}: emitter type {t!r} is not supported yet (supported: area, attached to a shape)")
+                self.lights.add(self, Props(v, path, self))
             else:
                 raise SceneError(f"{path}: unknown plugin type {t!r}")
         if not shapes:
