@@ -22,6 +22,7 @@ from . import perturb
 from ..scene.props import SceneError
 from ..spectrum import luminance_rgb
 from .principled import Principled, PrincipledThin
+from .layered import CoatedConductor, CoatedDiffuse
 
 BSDF_TYPES: dict[str, type] = {
     "diffuse": Diffuse,
@@ -36,6 +37,8 @@ BSDF_TYPES: dict[str, type] = {
     "null": Null,
     "principled": Principled,
     "principledthin": PrincipledThin,
+    "coateddiffuse": CoatedDiffuse,
+    "coatedconductor": CoatedConductor,
 }
 
 

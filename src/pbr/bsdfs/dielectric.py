@@ -62,6 +62,93 @@ def _eta(loader, props, rough: bool):
     return 1.0, si, se
 
 
+# -- shared interface math (also used by the layered BSDFs) ------------------------------
+# ``lobes`` restricts sampling to REFLECTION or TRANSMISSION (pbrt-v4's sample flags): the
+# restricted lobe is then chosen with probability 1 and its weight carries the Fresnel
+# factor instead. It is a Python constant, so each kernel holds one variant.
+BOTH = REFLECTION | TRANSMISSION
+
+
+def smooth_dielectric_sample(wi, eta, u1, lobes=BOTH):
+    """Sample a smooth interface: (wo, pdf of the lobe choice, radiance weight, reflected
+    mask, eta_it, eta_ti). The weight is 0 where the only allowed lobe has zero energy."""
+    r, cos_t, eta_it, eta_ti = fresnel_dielectric(wi.z, eta)
+    if lobes == BOTH:
+        sel_r = u1 < r
+        pdf = dr.select(sel_r, r, 1.0 - r)
+        # Lobe choice in proportion to R / (1 - R) makes the Fresnel factor cancel.
+        weight = dr.select(sel_r, 1.0, eta_ti * eta_ti)
+    elif lobes == REFLECTION:
+        sel_r, pdf, weight = mi.Bool(True), mi.Float(1.0), r
+    else:
+        sel_r, pdf, weight = mi.Bool(False), mi.Float(1.0), (1.0 - r) * (eta_ti * eta_ti)
+    wo = dr.select(sel_r, reflect(wi), refract(wi, cos_t, eta_ti))
+    return wo, pdf, weight, sel_r, eta_it, eta_ti
+
+
+def rough_dielectric_eval(wi, wo, eta, micro, lobes=BOTH):
+    """Walter et al.'s microfacet interface for directions ``wi`` -> ``wo``:
+    (f |cos_o| for radiance transport, density of sampling wo, reflected mask, valid mask).
+    ``micro(m)`` returns (D(m) G(wi, wo, m), density of sampling m given wi); ``lobes``
+    restricts the density (not the value) to one lobe."""
+    cos_i, cos_o = wi.z, wo.z
+    is_r = cos_i * cos_o > 0
+    eta_io = dr.select(cos_i > 0, eta, dr.rcp(eta))      # eta_t / eta_i across the macro-surface
+    m = dr.normalize(wi + wo * dr.select(is_r, 1.0, eta_io))
+    m = dr.mulsign(m, m.z)
+    d_i, d_o = dr.dot(wi, m), dr.dot(wo, m)
+    # Both directions on the side of m their macro-surface side implies (else G = 0).
+    ok = (cos_i != 0) & (d_i * cos_i > 0) & (d_o * cos_o > 0)
+    f = fresnel_dielectric(d_i, eta)[0]
+    sel = dr.select(is_r, f, 1.0 - f)
+    if lobes == REFLECTION:
+        choice = dr.select(is_r & (f > 0), 1.0, 0.0)
+    elif lobes == TRANSMISSION:
+        choice = dr.select(~is_r & (f < 1), 1.0, 0.0)
+    else:
+        choice = sel
+    den_t = d_i + eta_io * d_o
+    dg, pdf_m = micro(m)
+    # f|cos_o|: F D G / (4 |cos_i|) for reflection; for refraction
+    # (1-F) D G |d_i d_o| eta^2 / (|cos_i| den^2) times the radiance scale 1/eta^2.
+    val = dr.select(is_r, 0.25, dr.abs(d_i * d_o) / (den_t * den_t)) * sel * dg / dr.abs(cos_i)
+    jac = dr.select(is_r, 0.25 / dr.abs(d_o), eta_io * eta_io * dr.abs(d_o) / (den_t * den_t))
+    pdf = pdf_m * choice * jac
+    ok &= dr.isfinite(val) & dr.isfinite(pdf)
+    return dr.select(ok, val, 0.0), dr.select(ok, pdf, 0.0), is_r, ok
+
+
+def rough_dielectric_sample(wi, eta, sample_m, weight_m, u1, u2, lobes=BOTH):
+    """Sample Walter et al.'s microfacet interface: (wo, pdf, radiance weight, reflected
+    mask, eta_it, ok). ``sample_m(wi_up, u2)`` returns (m, density of m);
+    ``weight_m(wo, m, d_i)`` is the weight with the Fresnel factor cancelled (the lobe
+    chosen with probability F or 1 - F); ``lobes`` as in :func:`smooth_dielectric_sample`."""
+    cos_i = wi.z
+    wi_up = dr.mulsign(wi, cos_i)
+    m, pdf_m = sample_m(wi_up, u2)
+    d_i = dr.dot(wi, m)
+    f, cos_t, eta_it, eta_ti = fresnel_dielectric(d_i, eta)
+    if lobes == BOTH:
+        sel_r = u1 < f
+        choice, scale = dr.select(sel_r, f, 1.0 - f), mi.Float(1.0)
+    elif lobes == REFLECTION:
+        sel_r, choice, scale = mi.Bool(True), mi.Float(1.0), f
+    else:
+        sel_r, choice, scale = mi.Bool(False), mi.Float(1.0), 1.0 - f
+    wo = dr.select(sel_r, reflect_about(wi, m), refract_about(wi, m, cos_t, eta_ti))
+    d_o = dr.dot(wo, m)
+    den_t = d_i + eta_it * d_o
+    jac = dr.select(sel_r, 0.25 / dr.abs(d_o), eta_it * eta_it * dr.abs(d_o) / (den_t * den_t))
+    pdf = pdf_m * choice * jac
+    w = weight_m(wo, m, d_i) * scale
+    # The lobe the sample claims must match its side of the surface (m may send a
+    # reflection below the horizon); such samples fail (pdf 0), as the eval agrees.
+    ok = ((cos_i != 0) & dr.select(sel_r, wo.z * cos_i > 0, wo.z * cos_i < 0)
+          & (d_i * cos_i > 0) & (d_o * wo.z > 0) & (pdf > 0) & dr.isfinite(pdf) & dr.isfinite(w) & (scale > 0))
+    w = dr.select(sel_r, w, w * eta_ti * eta_ti)
+    return wo, dr.select(ok, pdf, 0.0), dr.select(ok, w, 0.0), sel_r, eta_it, ok
+
+
 class _Dielectric(BSDFType):
     """Shared parsing and parameter tables: eta and the two optional spectral scales."""
 
@@ -151,12 +238,8 @@ class SmoothDielectric(_Dielectric):
     def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
         wi = ctx.si.wi
         eta = self._eta_of(ctx, idx, active)
-        r, cos_t, eta_it, eta_ti = fresnel_dielectric(wi.z, eta)
-        sel_r = u1 < r
-        wo = dr.select(sel_r, reflect(wi), refract(wi, cos_t, eta_ti))
-        # Lobe choice in proportion to R / (1 - R) makes the Fresnel factor cancel.
-        weight = self._lobe_weight(ctx, idx, sel_r, 1.0, eta_ti * eta_ti, active)
-        pdf = dr.select(sel_r, r, 1.0 - r)
+        wo, pdf, w, sel_r, eta_it, _ = smooth_dielectric_sample(wi, eta, u1)
+        weight = self._lobe_weight(ctx, idx, sel_r, w, w, active)
         return BSDFSample(wo, dr.select(active, pdf, 0.0), dr.select(sel_r, 1.0, eta_it), mi.Bool(True),
                           dr.select(active & (pdf > 0), weight, 0.0), self._terminates(idx, active))
 
@@ -259,29 +342,16 @@ class RoughDielectric(_Dielectric):
     def _eval_pdf(self, ctx, idx, prm, wo, active):
         eta, au, av, var = prm
         wi = ctx.si.wi
-        cos_i, cos_o = wi.z, wo.z
-        is_r = cos_i * cos_o > 0
-        eta_io = dr.select(cos_i > 0, eta, dr.rcp(eta))      # eta_t / eta_i across the macro-surface
-        m = dr.normalize(wi + wo * dr.select(is_r, 1.0, eta_io))
-        m = dr.mulsign(m, m.z)
-        d_i, d_o = dr.dot(wi, m), dr.dot(wo, m)
-        # Both directions on the side of m their macro-surface side implies (else G = 0).
-        ok = active & (cos_i != 0) & (d_i * cos_i > 0) & (d_o * cos_o > 0)
-        f = fresnel_dielectric(d_i, eta)[0]
-        sel = dr.select(is_r, f, 1.0 - f)
-        den_t = d_i + eta_io * d_o
+        cos_i = wi.z
 
-        def micro(variant):
-            d, sd = self._distributions(variant, au, av, cos_i)
-            return d.D(m) * d.G(wi, wo, m), sd.pdf(dr.mulsign(wi, cos_i), m)
+        def micro(m):
+            def per_variant(variant):
+                d, sd = self._distributions(variant, au, av, cos_i)
+                return d.D(m) * d.G(wi, wo, m), sd.pdf(dr.mulsign(wi, cos_i), m)
+            return self._per_variant(var, per_variant)
 
-        dg, pdf_m = self._per_variant(var, micro)
-        # f|cos_o|: F D G / (4 |cos_i|) for reflection; for refraction
-        # (1-F) D G |d_i d_o| eta^2 / (|cos_i| den^2) times the radiance scale 1/eta^2.
-        val = dr.select(is_r, 0.25, dr.abs(d_i * d_o) / (den_t * den_t)) * sel * dg / dr.abs(cos_i)
-        jac = dr.select(is_r, 0.25 / dr.abs(d_o), eta_io * eta_io * dr.abs(d_o) / (den_t * den_t))
-        pdf = pdf_m * sel * jac
-        ok &= dr.isfinite(val) & dr.isfinite(pdf)
+        val, pdf, is_r, ok = rough_dielectric_eval(wi, wo, eta, micro)
+        ok &= active
         value = self._lobe_weight(ctx, idx, is_r, val, val, ok)
         return dr.select(ok, value, 0.0), dr.select(ok, pdf, 0.0)
 
@@ -289,35 +359,22 @@ class RoughDielectric(_Dielectric):
         eta, au, av, var = prm
         wi = ctx.si.wi
         cos_i = wi.z
-        active = active & (cos_i != 0)
-        wi_up = dr.mulsign(wi, cos_i)
 
-        def sample_m(variant):
-            return self._distributions(variant, au, av, cos_i)[1].sample(wi_up, u2)
+        def sample_m(wi_up, u):
+            return self._per_variant(var, lambda v: self._distributions(v, au, av, cos_i)[1].sample(wi_up, u))
 
-        m, pdf_m = self._per_variant(var, sample_m)
-        d_i = dr.dot(wi, m)
-        f, cos_t, eta_it, eta_ti = fresnel_dielectric(d_i, eta)
-        sel_r = u1 < f
-        wo = dr.select(sel_r, reflect_about(wi, m), refract_about(wi, m, cos_t, eta_ti))
-        d_o = dr.dot(wo, m)
-        den_t = d_i + eta_it * d_o
-        jac = dr.select(sel_r, 0.25 / dr.abs(d_o), eta_it * eta_it * dr.abs(d_o) / (den_t * den_t))
-        pdf = pdf_m * dr.select(sel_r, f, 1.0 - f) * jac
+        def weight_m(wo, m, d_i):
+            def per_variant(variant):
+                d, sd = self._distributions(variant, au, av, cos_i)
+                if variant[1]:
+                    # D G1(wi) |wi.m| / |cos_i| cancels against the visible-normal density.
+                    return (d.G1(wo, m),)
+                return (d.G(wi, wo, m) * dr.abs(d_i) / (dr.abs(cos_i) * m.z) * (d.D(m) / sd.D(m)),)
+            return self._per_variant(var, per_variant)[0]
 
-        def weight(variant):
-            d, sd = self._distributions(variant, au, av, cos_i)
-            if variant[1]:
-                # D G1(wi) |wi.m| / |cos_i| cancels against the visible-normal density.
-                return (d.G1(wo, m),)
-            return (d.G(wi, wo, m) * dr.abs(d_i) / (dr.abs(cos_i) * m.z) * (d.D(m) / sd.D(m)),)
-
-        (w,) = self._per_variant(var, weight)
-        # The lobe the sample claims must match its side of the surface (m may send a
-        # reflection below the horizon); such samples fail (pdf 0), as eval_pdf agrees.
-        ok = (active & dr.select(sel_r, wo.z * cos_i > 0, wo.z * cos_i < 0)
-              & (d_i * cos_i > 0) & (d_o * wo.z > 0) & (pdf > 0) & dr.isfinite(pdf) & dr.isfinite(w))
-        spec = self._lobe_weight(ctx, idx, sel_r, w, w * eta_ti * eta_ti, ok)
+        wo, pdf, w, sel_r, eta_it, ok = rough_dielectric_sample(wi, eta, sample_m, weight_m, u1, u2)
+        ok &= active
+        spec = self._lobe_weight(ctx, idx, sel_r, w, w, ok)
         return BSDFSample(wo, dr.select(ok, pdf, 0.0), dr.select(sel_r, 1.0, eta_it), mi.Bool(False),
                           dr.select(ok, spec, 0.0), self._terminates(idx, active))
 
