@@ -31,7 +31,7 @@ class PathIntegrator(SamplingIntegrator):
         self.max_depth = props.int("max_depth", -1, min=-1)
         self.rr_depth = props.int("rr_depth", 5, min=0)
         self.hide_emitters = props.bool("hide_emitters", False)
-        self.light_sampler = props.string("light_sampler", "power", choices=LIGHT_SAMPLERS)
+        self.light_sampler = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
         props.finish()
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
@@ -66,7 +66,7 @@ class PathIntegrator(SamplingIntegrator):
             valid |= hit
 
             # Emission found by BSDF sampling (or seen directly), MIS-weighted.
-            light = dr.gather(mi.UInt32, scene.shape_light, shape, hit)
+            light = lights.light_of_hit(scene, shape, si, hit)
             on_light = hit & (light > 0)
             # hide_emitters (Mitsuba's meaning): camera rays pass through area lights.
             skip = on_light & (depth == 0) if self.hide_emitters else mi.Bool(False)

@@ -13,11 +13,22 @@ import drjit as dr
 import mitsuba as mi
 
 from .area import AreaLight
+from .point import PointLight
+from .spot import SpotLight
+from .projector import ProjectorLight, ProjectionLight
+from .goniometric import GoniometricLight
+from .directional import DirectionalLight, DistantLight
+from .infinite import ConstantLight, EnvMapLight, PortalEnvMapLight
+from .directionalarea import DirectionalAreaLight
 from .base import LightSample, LightType  # noqa: F401
-from .lightsamplers import make_light_sampler, LIGHT_SAMPLERS  # noqa: F401
+from .lightsamplers import make_light_sampler, LightTable, LIGHT_SAMPLERS  # noqa: F401
 from ..scene.props import SceneError
 
 LIGHT_TYPES: dict[str, type] = {"area": AreaLight}
+LIGHT_TYPES.update(constant=ConstantLight, envmap=EnvMapLight, portalenvmap=PortalEnvMapLight,
+                   directionalarea=DirectionalAreaLight)
+LIGHT_TYPES.update(point=PointLight, spot=SpotLight, projector=ProjectorLight, projection=ProjectionLight,
+                   goniometric=GoniometricLight, directional=DirectionalLight, distant=DistantLight)
 
 
 class LightSet:
@@ -37,11 +48,12 @@ class LightSet:
         t = props.type
         if t not in LIGHT_TYPES:
             raise props.error(None, f"unsupported emitter type {t!r} (supported: {', '.join(sorted(LIGHT_TYPES))})")
-        if (t == "area") != (shape_index is not None):
-            raise props.error(None, "an 'area' emitter must be attached to a shape" if t == "area"
+        surface = t == "area" or getattr(LIGHT_TYPES[t], "surface", False)  # attached to a shape
+        if surface != (shape_index is not None):
+            raise props.error(None, f"a {t!r} emitter must be attached to a shape" if surface
                               else f"a {t!r} emitter cannot be attached to a shape")
         fam = self.families.setdefault(t, LIGHT_TYPES[t]())
-        local = fam.add(loader, props, shape_index) if t == "area" else fam.add(loader, props)
+        local = fam.add(loader, props, shape_index) if surface else fam.add(loader, props)
         self.entries.append((t, local))
         return len(self.entries) - 1
 
@@ -50,19 +62,42 @@ class LightSet:
         for f in self.families.values():
             f.textures = scene.textures
             f.build(scene)
-        self.family_of = mi.UInt32([self.order.index(t) for t, _ in self.entries])
-        self.local_of = mi.UInt32([i for _, i in self.entries])
+        # Emitters -> lights: an area emitter on a triangle mesh is one light per triangle.
+        # Light indices (sampler, dispatch, shape_light) number the expanded lights.
+        table = LightTable(self.entries, self.families, scene)
+        self.first_light = table.first
+        self.family_of = mi.UInt32(np.repeat([self.order.index(t) for t, _ in self.entries], table.counts))
+        self.local_of = mi.UInt32(table.local)
+        self._map_shapes(scene, table)
         self.infinite_ids = [g for g, (t, _) in enumerate(self.entries) if self.families[t].infinite]
         self.any_delta = any(f.delta for f in self.families.values())
+        # Shape-attached families other than 'area' (directionalarea): L/pdf_Li mask them out.
+        self._other_surface = any(getattr(f, "surface", False) for t, f in self.families.items() if t != "area")
         bbox = scene.mi_scene.bbox()
         c = np.array(bbox.center()) if bbox.valid() else np.zeros(3)
         self.scene_center = c
         self.scene_radius = float(np.linalg.norm(np.array(bbox.max) - c)) if bbox.valid() else 1.0
-        powers = np.array([self.families[t].power(i, scene) for t, i in self.entries], dtype=np.float64)
-        bounds = [self.families[t].bounds(i, scene) for t, i in self.entries]
-        if len(self.entries) and not np.all(np.isfinite(powers)):
-            raise SceneError("scene: a light has a non-finite power")
-        self.sampler = make_light_sampler(sampler_kind, powers, bounds)
+        self.sampler = make_light_sampler(sampler_kind, table.powers, table.bounds)
+
+    def _map_shapes(self, scene, table) -> None:
+        """``scene.shape_light``: shape -> its emitter's first light + 1 (0: none), and
+        which shapes are one light per triangle (a hit's light adds its prim_index)."""
+        if not hasattr(self, "shape_emitter"):       # the loader's table: emitter index + 1
+            self.shape_emitter = np.array(scene.shape_light, dtype=np.int64)
+        se = self.shape_emitter
+        first = np.append(table.first, 0)
+        scene.shape_light = mi.UInt32(np.where(se > 0, first[se - 1] + 1, 0).astype(np.uint32))
+        per_tri = np.array([t == "area" and self.families[t].is_mesh(i) for t, i in self.entries] + [False])
+        self.any_mesh_light = bool(per_tri[se[se > 0] - 1].any()) if np.any(se > 0) else False
+        self.shape_per_prim = mi.UInt32(np.where(se > 0, per_tri[se - 1], False).astype(np.uint32))
+
+    def light_of_hit(self, scene, shape, si, active):
+        """Light index + 1 of a surface hit on pbr shape ``shape`` (0 where the shape does
+        not emit); on an emissive triangle mesh the hit triangle's light."""
+        light = dr.gather(mi.UInt32, scene.shape_light, shape, active)
+        if self.any_mesh_light:
+            light += dr.gather(mi.UInt32, self.shape_per_prim, shape, active) * si.prim_index
+        return light
 
     def _dispatch(self, method, light, active, *args):
         local = dr.gather(mi.UInt32, self.local_of, light, active)
@@ -75,6 +110,9 @@ class LightSet:
     # -- used by integrators -----------------------------------------------------------
     def L(self, light, si, wl, active):
         """Emitted radiance of area light ``light`` at surface hit ``si`` (toward si.wi)."""
+        if "area" not in self.families:  # no area lights (e.g. only delta lights)
+            return mi.Spectrum(0.0)
+        active = self._area_only(light, active)
         return self.area.L(dr.gather(mi.UInt32, self.local_of, light, active), si, wl, active)
 
     def sample_Li(self, ref, u1, u2, wl, active) -> LightSample:
@@ -86,8 +124,16 @@ class LightSet:
 
     def pdf_Li(self, light, ref_p, ref_n, si, active):
         """Density of NEE reaching area-light hit ``si`` from (ref_p, ref_n)."""
+        if "area" not in self.families:
+            return mi.Float(0.0)
+        active = self._area_only(light, active)
         local = dr.gather(mi.UInt32, self.local_of, light, active)
         return self.sampler.pmf(light, ref_p, ref_n, active) * self.area.pdf_Li(local, ref_p, si, active)
+
+    def _area_only(self, light, active):
+        if not self._other_surface:
+            return active
+        return active & (dr.gather(mi.UInt32, self.family_of, light, active) == self.order.index("area"))
 
     @property
     def has_infinite(self) -> bool:
@@ -100,8 +146,10 @@ class LightSet:
             t, i = self.entries[g]
             fam = self.families[t]
             idx = mi.UInt32(i)
-            Le = fam.Le(idx, d, wl, active)
-            pdf = fam.pdf_Le_dir(idx, d, active) * self.sampler.pmf(mi.UInt32(g), ref_p, ref_n, active)
+            kw = {"ref_p": ref_p} if getattr(fam, "needs_ref", False) else {}  # portal lights: ray origin
+            Le = fam.Le(idx, d, wl, active, **kw)
+            pdf = fam.pdf_Le_dir(idx, d, active, **kw) * self.sampler.pmf(
+                mi.UInt32(int(self.first_light[g])), ref_p, ref_n, active)
             out.append((Le, pdf))
         return out
 

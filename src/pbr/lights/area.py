@@ -1,7 +1,23 @@
 """``area``: a diffuse emitter attached to a shape, one-sided (it emits on the side its
-normal points to, as Mitsuba's ``area``). Points are sampled uniformly by area on the
-shape (through Mitsuba's shape sampling), so the solid-angle density is
-``dist^2 / (|cos theta_l| A)``."""
+normal points to, as Mitsuba's ``area``).
+
+An emitter on a triangle mesh (``obj``, ``ply``, ``cube``: any ``mi.Mesh`` but a
+rectangle) is *one light per triangle*, as in pbrt-v4: the light samplers see every
+triangle with its own power and bounds, so a large emissive mesh is sampled where it
+matters. A triangle is sampled uniformly by area with pbr's own code from the mesh's
+vertex arrays; the light of a hit on such a mesh is the mesh's first light plus the hit's
+``prim_index`` (:meth:`pbr.lights.LightSet.light_of_hit`). Other shapes are one light
+each: a rectangle is sampled uniformly by pbr's code from its corners (so that scenes with
+many emitting rectangles need no virtual call over all shapes), disks, spheres and
+cylinders through Mitsuba's ``shape.sample_position``. Either way the solid-angle
+density of a point is ``dist^2 / (|cos theta_g| A)`` with the geometric normal; the side
+that emits follows the shading normal (as the radiance seen at a hit does). Normals
+follow Mitsuba's orientation (``flip_normals`` on Mitsuba's own meshes flips the normals,
+not the winding).
+
+Local light indices of the family number these *sub-lights*: instance ``i`` (one per
+emitter) owns ``count(i)`` consecutive ones from ``first(i)``.
+"""
 
 from __future__ import annotations
 
@@ -11,6 +27,54 @@ import numpy as np
 
 from ..textures import load_spectrum
 from .base import LightType, LightSample
+
+# Mesh shapes that stay one light (Mitsuba builds a rectangle as two triangles).
+SINGLE_LIGHT_MESHES = ("Rectangle",)
+# How a sub-light is sampled: a triangle or a parallelogram (rectangle) by pbr's own code
+# from its corners, or any other shape through Mitsuba's ``shape.sample_position``.
+TRIANGLE, PARALLELOGRAM, MITSUBA = 0, 1, 2
+
+
+def _is_triangle_mesh(shape) -> bool:
+    return bool(shape.is_mesh()) and shape.class_name() not in SINGLE_LIGHT_MESHES
+
+
+def _mesh_arrays(shape):
+    """World-space vertex positions (V, 3), faces (F, 3) and, where the mesh has them,
+    vertex normals and texture coordinates (else None)."""
+    params = mi.traverse(shape)
+    v = np.array(params["vertex_positions"], dtype=np.float64).reshape(-1, 3)
+    f = np.array(params["faces"], dtype=np.int64).reshape(-1, 3)
+    n = uv = None
+    if shape.has_vertex_normals() and "vertex_normals" in params:
+        n = np.array(params["vertex_normals"], dtype=np.float64).reshape(-1, 3)
+        if len(n) != len(v):
+            n = None
+    if shape.has_vertex_texcoords() and "vertex_texcoords" in params:
+        uv = np.array(params["vertex_texcoords"], dtype=np.float64).reshape(-1, 2)
+        if len(uv) != len(v):
+            uv = None
+    return v, f, n, uv
+
+
+def _rectangle(shape):
+    """Corners p(0,0), p(1,0), p(0,1) of a Mitsuba rectangle (uv = the sample) and its
+    normal."""
+    ps = shape.sample_position(0.0, mi.Point2f([0.0, 1.0, 0.0], [0.0, 0.0, 1.0]))
+    P = np.array(ps.p, dtype=np.float64).T
+    n = np.array(ps.n, dtype=np.float64).T[0]
+    return P, n / np.linalg.norm(n)
+
+
+def _shape_normal_cone(shape):
+    """(axis, cos half-angle) bounding the normals of a shape sampled through Mitsuba:
+    planar shapes (every sampled normal equal) get their normal, others the whole sphere."""
+    u = np.random.default_rng(0).random((2, 16)).astype(np.float32)
+    ps = shape.sample_position(0.0, mi.Point2f(u[0], u[1]))
+    n = np.array(ps.n, dtype=np.float64).T
+    if np.all(np.isfinite(n)) and np.all(n @ n[0] > 1.0 - 1e-6):
+        return n[0] / np.linalg.norm(n[0]), 1.0
+    return np.array([0.0, 0.0, 1.0]), -1.0
 
 
 class AreaLight(LightType):
@@ -22,39 +86,188 @@ class AreaLight(LightType):
         self.instances.append({"radiance": slot, "shape": shape_index})
         return len(self.instances) - 1
 
+    # -- sub-lights --------------------------------------------------------------------
+    def count(self, i: int) -> int:
+        return self._count[i]
+
+    def first(self, i: int) -> int:
+        return self._first[i]
+
+    def is_mesh(self, i: int) -> bool:
+        """True where instance ``i`` is one light per triangle (hits add prim_index)."""
+        return self._mesh[i]
+
     def build(self, scene) -> None:
         shapes = scene.mi_scene.shapes()
-        self.shape_index = mi.UInt32([i["shape"] for i in self.instances])
-        self.radiance = mi.UInt32([i["radiance"] for i in self.instances])
-        self.area = mi.Float([shapes[i["shape"]].surface_area()[0] for i in self.instances])
+        # pbr shape index -> Mitsuba's shape order (Mitsuba may reorder shapes).
+        to_pbr = np.array(scene.geometry.to_pbr_shape, dtype=np.int64)
+        to_mi = np.empty_like(to_pbr)
+        to_mi[to_pbr] = np.arange(len(to_pbr))
+        consts = [scene.textures.constant_value(inst["radiance"]) for inst in self.instances]
+        self._count, self._first, self._mesh = [], [], []
+        self._power, self._bounds = [], []
+        cols = {k: [] for k in ("radiance", "area", "mi_shape", "kind", "P", "n", "vn", "uv")}
+        o = 0
+        for inst, L in zip(self.instances, consts):
+            k = int(to_mi[inst["shape"]])
+            shape = shapes[k]
+            if _is_triangle_mesh(shape):
+                v, f, vn, uv = _mesh_arrays(shape)
+                # Mitsuba's flip_normals flips both normals, not the winding.
+                sg = ss = -1.0 if shape.has_flipped_normals() else 1.0
+                P = v[f]                                       # (F, 3 vertices, 3)
+                cr = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+                a2 = np.linalg.norm(cr, axis=1)
+                ng = sg * cr / np.where(a2 > 0, a2, 1.0)[:, None]
+                A = 0.5 * a2
+                c = len(f)
+                # The cone of the triangle's normals: its geometric normal, widened to
+                # hold the vertex normals (which decide the side that emits).
+                cos_o = np.ones(c)
+                VN = np.zeros((c, 3, 3))
+                if vn is not None:
+                    VN = ss * vn[f]
+                    unit = VN / np.maximum(np.linalg.norm(VN, axis=2, keepdims=True), 1e-30)
+                    cos_o = np.minimum(1.0, np.einsum("fj,fkj->fk", ng, unit).min(axis=1))
+                    cos_o = np.where(cos_o > 0, cos_o, -1.0)
+                phi = np.where(a2 > 0, np.pi * A * L, 0.0)
+                self._bounds.append({"p_min": P.min(axis=1), "p_max": P.max(axis=1), "phi": phi, "w": ng,
+                                     "cos_theta_o": cos_o, "cos_theta_e": np.zeros(c),
+                                     "two_sided": np.zeros(c, bool)})
+                cols["kind"].append(np.full(c, TRIANGLE))
+                cols["P"].append(P)
+                cols["n"].append(ng)
+                cols["vn"].append(VN)
+                cols["uv"].append(uv[f] if uv is not None else np.full((c, 3, 2), np.nan))
+                self._mesh.append(True)
+            else:
+                c = 1
+                A = np.array([float(shape.surface_area()[0])])
+                phi = np.pi * A * L
+                if shape.class_name() == "Rectangle":
+                    P, ng = _rectangle(shape)
+                    corners = np.vstack([P, P[1] + P[2] - P[0]])
+                    lo, hi, w, cos_o = corners.min(axis=0), corners.max(axis=0), ng, 1.0
+                    cols["kind"].append(np.full(1, PARALLELOGRAM))
+                else:
+                    bb = shape.bbox()
+                    lo, hi = np.array(bb.min, dtype=np.float64), np.array(bb.max, dtype=np.float64)
+                    w, cos_o = _shape_normal_cone(shape)
+                    P, ng = np.zeros((3, 3)), np.zeros(3)
+                    cols["kind"].append(np.full(1, MITSUBA))
+                self._bounds.append({"p_min": lo, "p_max": hi, "phi": float(phi[0]), "w": w,
+                                     "cos_theta_o": cos_o, "cos_theta_e": 0.0, "two_sided": False})
+                cols["P"].append(P[None])
+                cols["n"].append(ng[None])
+                cols["vn"].append(np.zeros((1, 3, 3)))
+                cols["uv"].append(np.full((1, 3, 2), np.nan))
+                self._mesh.append(False)
+            self._power.append(phi)
+            cols["area"].append(A)
+            cols["radiance"].append(np.full(c, inst["radiance"]))
+            cols["mi_shape"].append(np.full(c, k))
+            self._count.append(c)
+            self._first.append(o)
+            o += c
+        self.n_sub = o
+        if not o:
+            return
+        cat = {k: np.concatenate(v) for k, v in cols.items()}
+        f32 = np.float32
+        self.radiance = mi.UInt32(cat["radiance"].astype(np.uint32))
+        self.area = mi.Float(cat["area"].astype(f32))
+        kind = cat["kind"]
+        self.kinds = sorted(set(int(x) for x in np.unique(kind)))
+        self.kind = mi.UInt32(kind.astype(np.uint32))
         self.shape_ptrs = scene.mi_scene.shapes_dr()
+        self.mi_shape = mi.UInt32(cat["mi_shape"].astype(np.uint32))
 
-    def power(self, i: int, scene) -> float:
-        inst = self.instances[i]
-        area = float(scene.mi_scene.shapes()[inst["shape"]].surface_area()[0])
-        return np.pi * area * scene.textures.constant_value(inst["radiance"])
+        def points(a):                        # (n, 3) -> Point3f
+            return mi.Point3f(*[mi.Float(np.ascontiguousarray(a[:, j], dtype=f32)) for j in range(3)])
+        self.P = [points(cat["P"][:, v]) for v in range(3)]
+        self.n = mi.Normal3f(points(cat["n"]))
+        self.has_normals = bool(np.any(cat["vn"] != 0))
+        if self.has_normals:
+            self.vn = [mi.Normal3f(points(cat["vn"][:, v])) for v in range(3)]
+        UV = cat["uv"]
+        self.has_uv = bool(np.any(np.isfinite(UV)))
+        if self.has_uv:
+            self.uv_ok = mi.Bool(np.all(np.isfinite(UV), axis=(1, 2)))
+            UV = np.nan_to_num(UV)
+            self.uv = [mi.Point2f(*[mi.Float(np.ascontiguousarray(UV[:, v, j], dtype=f32)) for j in range(2)])
+                       for v in range(3)]
 
+    def power(self, i: int, scene):
+        """Emitted power of instance ``i``: a float, or one value per triangle (array)."""
+        p = self._power[i]
+        return p if self._mesh[i] else float(p[0])
+
+    def bounds(self, i: int, scene):
+        """pbrt-v4 LightBounds of instance ``i`` (for meshes: a dict of per-triangle arrays)."""
+        return self._bounds[i]
+
+    # -- radiance and sampling -----------------------------------------------------------
     def L(self, idx, si, wl, active):
         active = active & (si.wi.z > 0)
         slot = dr.gather(mi.UInt32, self.radiance, idx, active)
         return dr.select(active, self.textures.eval(slot, si.uv, wl.lambda_, active), 0.0)
 
+    def _sample_planar(self, idx, u, active):
+        """Uniform point on a triangle or parallelogram sub-light: (p, n, shading n, uv)."""
+        p0, p1, p2 = (dr.gather(mi.Point3f, t, idx, active) for t in self.P)
+        if TRIANGLE in self.kinds:
+            t = dr.safe_sqrt(1.0 - u.x)
+            b1, b2 = 1.0 - t, t * u.y
+            if PARALLELOGRAM in self.kinds:
+                par = dr.gather(mi.UInt32, self.kind, idx, active) == PARALLELOGRAM
+                b1, b2 = dr.select(par, u.x, b1), dr.select(par, u.y, b2)
+        else:
+            b1, b2 = u.x, u.y
+        p = dr.fma(p1 - p0, b1, dr.fma(p2 - p0, b2, p0))
+        ng = dr.gather(mi.Normal3f, self.n, idx, active)
+        ns = ng
+        b0 = 1.0 - b1 - b2
+        if self.has_normals:
+            n0, n1, n2 = (dr.gather(mi.Normal3f, t_, idx, active) for t_ in self.vn)
+            nsi = n0 * b0 + n1 * b1 + n2 * b2
+            ns = dr.select(dr.squared_norm(nsi) > 0, dr.normalize(nsi), ng)
+        uv = mi.Point2f(b1, b2)
+        if self.has_uv:
+            uv0, uv1, uv2 = (dr.gather(mi.Point2f, t_, idx, active) for t_ in self.uv)
+            ok = dr.gather(mi.Bool, self.uv_ok, idx, active)
+            uv = dr.select(ok, uv0 * b0 + uv1 * b1 + uv2 * b2, uv)
+        return p, ng, ns, uv
+
     def sample_Li(self, idx, ref, u, wl, active) -> LightSample:
-        shape = dr.gather(mi.ShapePtr, self.shape_ptrs, dr.gather(mi.UInt32, self.shape_index, idx, active), active)
-        ps = shape.sample_position(ref.time, u, active)
-        d = ps.p - ref.p
+        planar = (TRIANGLE in self.kinds) or (PARALLELOGRAM in self.kinds)
+        if planar:
+            p, ng, ns, uv = self._sample_planar(idx, u, active)
+        if MITSUBA in self.kinds:
+            # Other shapes through Mitsuba (a virtual call over the scene's shapes).
+            other = (dr.gather(mi.UInt32, self.kind, idx, active) == MITSUBA) if planar else mi.Bool(True)
+            on = active & other
+            shape = dr.gather(mi.ShapePtr, self.shape_ptrs, dr.gather(mi.UInt32, self.mi_shape, idx, on), on)
+            ps = shape.sample_position(ref.time, u, on)
+            if planar:
+                p, ng, ns, uv = (dr.select(other, a, b) for a, b in ((ps.p, p), (ps.n, ng), (ps.n, ns), (ps.uv, uv)))
+            else:
+                p, ng, ns, uv = ps.p, ps.n, ps.n, ps.uv
+        area = dr.gather(mi.Float, self.area, idx, active)
+        d = p - ref.p
         dist2 = dr.squared_norm(d)
         wi = d * dr.rsqrt(dist2)
-        cos_l = -dr.dot(ps.n, wi)
-        active = active & (cos_l > 0) & (ps.pdf > 0)
-        pdf = ps.pdf * dist2 / cos_l
+        cos_g = dr.abs(dr.dot(ng, wi))
+        active = active & (dr.dot(ns, wi) < 0) & (cos_g > 0) & (area > 0) & (dist2 > 0)
+        pdf = dist2 / (cos_g * area)
         slot = dr.gather(mi.UInt32, self.radiance, idx, active)
-        L = self.textures.eval(slot, ps.uv, wl.lambda_, active)
-        return LightSample(dr.select(active, L, 0.0), wi, dr.select(active, pdf, 0.0), ps.p, mi.Bool(False))
+        L = self.textures.eval(slot, uv, wl.lambda_, active)
+        return LightSample(dr.select(active, L, 0.0), wi, dr.select(active, pdf, 0.0), p, mi.Bool(False))
 
     def pdf_Li(self, idx, ref_p, si, active):
         """Solid-angle density of reaching hit ``si`` from ``ref_p`` by sampling this light."""
         area = dr.gather(mi.Float, self.area, idx, active)
-        cos_l = dr.abs(si.wi.z)
-        dist2 = dr.squared_norm(si.p - ref_p)
-        return dr.select(active & (cos_l > 0), dist2 / (cos_l * area), 0.0)
+        d = si.p - ref_p
+        dist2 = dr.squared_norm(d)
+        cos_g = dr.abs(dr.dot(si.n, d)) * dr.rsqrt(dist2)
+        ok = active & (cos_g > 0) & (area > 0)
+        return dr.select(ok, dist2 / (cos_g * area), 0.0)

@@ -17,7 +17,8 @@ BSDF_LIKE = {"diffuse", "conductor", "roughconductor", "dielectric", "thindielec
              "plastic", "roughplastic", "twosided", "mask", "blendbsdf", "null", "bumpmap", "normalmap",
              "principled", "principledthin", "coateddiffuse", "coatedconductor", "diffusetransmission",
              "measured", "hair", "mix"}
-EMITTER_LIKE = {"area", "point", "spot", "projector", "directional", "constant", "envmap", "directionalarea"}
+EMITTER_LIKE = {"area", "point", "spot", "projector", "directional", "constant", "envmap", "directionalarea",
+                "projection", "goniometric", "distant", "portalenvmap"}
 TEXTURE_LIKE = {"rgb", "spectrum", "blackbody", "d65", "uniform", "checkerboard", "bitmap", "scale"}
 
 
@@ -86,7 +87,7 @@ class Loader:
 
         sensors, integrator_props, shapes = [], None, []
         shape_bsdf, shape_light, shape_ids = [], [], []
-        default_bsdf = None
+        default_bsdf = default_black = None
         root = Props(self.d, "scene", self)
         for key, v in self.d.items():
             if key == "type":
@@ -116,6 +117,12 @@ class Loader:
                             raise p.error(k, "a shape takes at most one BSDF")
                         p.mark(nested[0])
                         b = self.bsdf(p.raw(nested[0]), p.key(nested[0]))
+                    elif any(c["type"] in EMITTER_LIKE for _, c in p.children()):
+                        # Mitsuba: an emitting shape without a BSDF gets a black diffuse one.
+                        if default_black is None:
+                            default_black = self.bsdfs.add(
+                                self, Props({"type": "diffuse", "reflectance": 0.0}, f"{path}.bsdf", self))
+                        b = default_black
                     else:
                         if default_bsdf is None:
                             default_bsdf = self.bsdfs.add(self, Props({"type": "diffuse"}, f"{path}.bsdf", self))
@@ -124,8 +131,9 @@ class Loader:
                 em_keys = [k for k, c in p.children() if c["type"] in EMITTER_LIKE]
                 for k in em_keys:
                     c = p.raw(k)
-                    if c["type"] != "area":
-                        raise p.error(k, f"a shape can only carry an 'area' emitter, got {c['type']!r}")
+                    if c["type"] not in ("area", "directionalarea"):
+                        raise p.error(k, f"a shape can only carry an 'area' or 'directionalarea' emitter, "
+                                         f"got {c['type']!r}")
                     if light:
                         raise p.error(k, "a shape takes at most one emitter")
                     light = self.lights.add(self, Props(c, p.key(k), self), sidx) + 1

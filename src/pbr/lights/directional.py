@@ -1,0 +1,108 @@
+"""``directional`` (Mitsuba; pbrt-v4's ``distant`` is the same light): parallel light
+along one direction, a Dirac delta in direction.
+
+Parameters: ``irradiance`` (W/m^2 on a surface facing the light; RGB in the
+illuminant form; not spatially varying), the propagation direction as ``direction`` or
+as local +z of ``to_world`` (Mitsuba), and pbrt-v4's ``scale`` and photometric
+``illuminance`` (the irradiance is rescaled so that its luminance, RGB multiplier
+excluded as pbrt-v4's ``SpectrumToPhotometric``, equals it). ``distant`` also takes
+pbrt-v4's ``L`` (for ``irradiance``) and ``from``/``to`` (light travels from ``from``
+toward ``to``; default (0,0,0) -> (0,0,1)).
+
+Light samples point against the propagation direction ``d``; the shadow ray runs to
+``p = ref - 2 r d`` with ``r`` the larger of the scene's bounding-sphere radius and the
+distance from its centre to ``ref`` (Mitsuba's choice), so it crosses the whole scene.
+Power ``pi r^2 E`` (pbrt-v4). It has no LightBounds (``None``: treated as infinite by
+the BVH sampler) and contributes nothing to escaped rays.
+"""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .base import LightType, LightSample
+from .point import load_constant_emission, photometric, luminance, vec_table, gather3
+
+
+def scene_sphere(scene):
+    """(centre, radius) of the scene's bounding sphere (as LightSet computes it)."""
+    bbox = scene.mi_scene.bbox()
+    if not bbox.valid():
+        return np.zeros(3), 1.0
+    c = np.array(bbox.center(), dtype=np.float64)
+    r = float(np.linalg.norm(np.array(bbox.max, dtype=np.float64) - c))
+    return c, max(r, 1e-4)
+
+
+class DirectionalLight(LightType):
+    name = "directional"
+    delta = True
+    pbrt_names = False
+
+    def add(self, loader, props, shape_index=None) -> int:
+        key = "irradiance"
+        if self.pbrt_names and props.has("L"):
+            if props.has("irradiance"):
+                raise props.error("L", "give either 'L' or 'irradiance', not both")
+            key = "L"
+        slot = load_constant_emission(loader, props, key)
+        given = [k for k in ("direction", "to_world") + (("from", "to") if self.pbrt_names else ()) if props.has(k)]
+        if "direction" in given and len(given) > 1:
+            raise props.error("direction", f"give only one of 'direction', 'to_world'"
+                              f"{', from/to' if self.pbrt_names else ''}")
+        if "to_world" in given and ("from" in given or "to" in given):
+            raise props.error("to_world", "give either 'to_world' or 'from'/'to', not both")
+        if props.has("direction"):
+            d = props.vector3("direction")
+        elif self.pbrt_names and ("from" in given or "to" in given):
+            d = props.vector3("to", [0.0, 0.0, 1.0]) - props.vector3("from", [0.0, 0.0, 0.0])
+        else:
+            d = props.transform("to_world")[:3, :3] @ np.array([0.0, 0.0, 1.0])
+        n = float(np.linalg.norm(d))
+        if not n > 1e-12:
+            raise props.error(given[0] if given else "direction", "the direction has zero length")
+        sc = props.float("scale", 1.0)
+        e_v = props.float("illuminance", -1.0)
+        if e_v > 0:
+            ph = photometric(loader.textures, slot)
+            if not ph > 0:
+                raise props.error("illuminance", "cannot reach a target illuminance with a black spectrum")
+            sc *= e_v / ph
+        props.finish()
+        self.instances.append({"slot": slot, "d": d / n, "factor": sc})
+        return len(self.instances) - 1
+
+    def build(self, scene) -> None:
+        I = self.instances
+        self.dir = vec_table([i["d"] for i in I])
+        self.slot = mi.UInt32([i["slot"] for i in I])
+        self.factor = mi.Float([i["factor"] for i in I])
+        c, r = scene_sphere(scene)
+        self.center = mi.Point3f(*c.tolist())
+        self.radius = float(r)
+
+    def power(self, i: int, scene) -> float:
+        inst = self.instances[i]
+        _, r = scene_sphere(scene)
+        return math.pi * r * r * inst["factor"] * luminance(scene.textures, inst["slot"])
+
+    def bounds(self, i: int, scene):
+        return None
+
+    def sample_Li(self, idx, ref, u, wl, active) -> LightSample:
+        d = gather3(mi.Vector3f, self.dir, idx, active)
+        r = dr.maximum(self.radius, dr.norm(ref.p - self.center))
+        p = ref.p - d * (2.0 * r)
+        slot = dr.gather(mi.UInt32, self.slot, idx, active)
+        E = self.textures.eval(slot, mi.Point2f(0.5), wl.lambda_, active) * dr.gather(mi.Float, self.factor, idx, active)
+        return LightSample(dr.select(active, E, 0.0), -d, dr.select(active, 1.0, 0.0), p, mi.Bool(True))
+
+
+class DistantLight(DirectionalLight):
+    """pbrt-v4's ``distant``: also takes ``L`` and ``from``/``to``."""
+    name = "distant"
+    pbrt_names = True
