@@ -87,3 +87,10 @@ def test_backend_errors():
     with pytest.raises(pbr.BackendError):
         pbr.set_backend("metal")
     assert pbr.get_backend() in ("llvm", "cuda")
+
+
+def test_scene_without_lights_renders_black():
+    d = pbr.cornell_box(8, 4)
+    del d["light"]["emitter"]
+    img = np.asarray(pbr.render(pbr.load_dict(d)))
+    assert img.shape == (8, 8, 3) and np.all(img == 0)

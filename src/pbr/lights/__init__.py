@@ -117,6 +117,9 @@ class LightSet:
 
     def sample_Li(self, ref, u1, u2, wl, active) -> LightSample:
         """Pick a light (sampler probability included in the returned pdf) and sample it."""
+        if not self.entries:
+            # No lights: an empty sample (pdf 0), so no shadow ray is traced.
+            return LightSample()
         light, pmf = self.sampler.sample(u1, ref.p, ref.n, active)
         ls = self._dispatch("sample_Li", light, active, ref, u2, wl)
         ls.pdf = ls.pdf * pmf
