@@ -9,6 +9,33 @@ from pbr import validate
 RES, SPP, BATCHES = 24, 1024, 16
 
 
+def sky_image(h=16, w=32):
+    """A small synthetic HDR sky: a bright sun-like blob over a blue-to-orange gradient."""
+    y, x = np.mgrid[0:h, 0:w]
+    img = np.zeros((h, w, 3), np.float32)
+    t = y / (h - 1)
+    img[..., 0] = 0.3 + 0.7 * t
+    img[..., 1] = 0.4 + 0.2 * t
+    img[..., 2] = 1.0 - 0.6 * t
+    sun = np.exp(-((x - w * 0.3) ** 2 + (y - h * 0.3) ** 2) / 3.0)
+    return img + 20.0 * sun[..., None] * np.array([1.0, 0.9, 0.7], np.float32)
+
+
+def lit_box(bsdf_small: dict, bsdf_large: dict | None = None, lighting: str = "area", scale=1):
+    """material_box under another light: 'point' (a point light inside the box instead of
+    the ceiling light) or 'envmap' (an environment seen through the open front; the box's
+    back wall is removed so that the sky lights the scene)."""
+    d = material_box(bsdf_small, bsdf_large, scale)
+    if lighting == "point":
+        del d["light"]
+        d["point"] = {"type": "point", "position": [0.2, 0.7, 0.6],
+                      "intensity": {"type": "rgb", "value": [3.0, 2.6, 2.2]}}
+    elif lighting == "envmap":
+        del d["light"], d["back"], d["ceiling"]
+        d["sky"] = {"type": "envmap", "bitmap": mi.Bitmap(sky_image()), "scale": 1.0}
+    return d
+
+
 def material_box(bsdf_small: dict, bsdf_large: dict | None = None, scale=1, max_depth=6):
     """The Cornell box with the two blocks made of the given BSDFs. Emitters are hidden
     (small variance of the image mean; see test_mitsuba_compare) and the film uses a box
