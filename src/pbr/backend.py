@@ -90,6 +90,32 @@ def _has(backend: str) -> bool:
         return False
 
 
+def loaded_libllvm() -> str | None:
+    """Path of the libLLVM already mapped into this process (Linux), or None."""
+    try:
+        with open("/proc/self/maps") as f:
+            for line in f:
+                if "libLLVM" in line:
+                    return line.split()[-1]
+    except OSError:
+        pass
+    return None
+
+
+def _check_loaded_llvm() -> None:
+    """Refuse an LLVM that Dr.Jit loaded before pbr could choose one (importing drjit or
+    mitsuba before pbr): Debian 12's libLLVM-15 aborts the process on Mitsuba's kernels."""
+    path = loaded_libllvm()
+    if path is None:
+        return
+    v = _llvm_version(path)
+    if v is not None and v < MIN_LLVM:
+        raise BackendError(
+            f"Dr.Jit has already loaded {path} (LLVM {v}), which cannot run pbr's kernels. This happens "
+            "when drjit or mitsuba is imported before pbr: import pbr first, or set DRJIT_LIBLLVM_PATH "
+            "to a libLLVM >= 16 before starting Python. " + _LLVM_HELP)
+
+
 def available_backends() -> list[str]:
     """Backends that Dr.Jit can initialise on this machine, preferred first."""
     return [b for b in ("cuda", "llvm") if _has(b)]
@@ -102,6 +128,8 @@ def set_backend(name: str = "auto") -> str:
         raise BackendError(f"set_backend: unknown backend {name!r}; expected 'llvm', 'cuda' or 'auto'")
     if name == "auto":
         name = "cuda" if _has("cuda") else "llvm"
+    if name == "llvm":
+        _check_loaded_llvm()
     if not _has(name):
         if name == "llvm":
             path = os.environ.get("DRJIT_LIBLLVM_PATH")
