@@ -297,23 +297,34 @@ class TextureSet:
         b = dr.gather(mi.Float, table, off + i0 + 1, active)
         return dr.fma(w, b - a, a)
 
-    def _eval_bitmap(self, bi, uv, lam, active, illuminant=True):
+    def _bitmap_lookup(self, bi, uv, active):
+        """Addressing shared by bitmap lookups: (texel index function (dx, dy) -> index into
+        the texel pools, bilinear weights, bilinear mask, resolution, to_uv coefficients)."""
         T = self.T
         size = dr.gather(mi.Array2u, T["b_size"], bi, active)
         off = dr.gather(mi.UInt32, T["b_offset"], bi, active)
         wrap = dr.gather(mi.UInt32, T["b_wrap"], bi, active)
         bil = dr.gather(mi.Bool, T["b_bilinear"], bi, active)
-        uv = self._apply_uv(T["b_to_uv"], uv, bi)
+        A = [dr.gather(mi.Float, a, bi, active) for a in T["b_to_uv"]]
+        st = mi.Point2f(A[0] * uv[0] + A[1] * uv[1] + A[2], A[3] * uv[0] + A[4] * uv[1] + A[5])
         res = mi.Vector2f(size)
-        p = uv * res - dr.select(bil, 0.5, 0.0)
+        p = st * res - dr.select(bil, 0.5, 0.0)
         p0 = dr.floor(p)
-        w1 = dr.select(bil, p - p0, 0.0)
+        w = dr.select(bil, p - p0, 0.0)
         ip = mi.Vector2i(p0)
 
+        def index(dx, dy):
+            q = _wrap(mi.Vector2i(ip.x + dx, ip.y + dy), mi.Vector2i(size), wrap)
+            return off + mi.UInt32(q.y) * size.x + mi.UInt32(q.x)
+
+        return index, w, bil, res, A
+
+    def _eval_bitmap(self, bi, uv, lam, active, illuminant=True):
+        T = self.T
+        index, w1, bil, _, _ = self._bitmap_lookup(bi, uv, active)
+
         def texel(dx, dy):
-            q = mi.Vector2i(ip.x + dx, ip.y + dy)
-            q = _wrap(q, mi.Vector2i(size), wrap)
-            k = off + mi.UInt32(q.y) * size.x + mi.UInt32(q.x)
+            k = index(dx, dy)
             c = dr.gather(mi.Array3f, T["b_coeffs"], k, active)
             s = dr.gather(mi.Float, T["b_scale"], k, active)
             return spec.sigmoid_polynomial(c, lam) * s
@@ -333,21 +344,10 @@ class TextureSet:
         maps) and its derivatives w.r.t. u and v: (value, d/du, d/dv)."""
         T = self.T
         bi = dr.gather(mi.UInt32, T["slot_index"], mi.UInt32(slot), active)
-        size = dr.gather(mi.Array2u, T["b_size"], bi, active)
-        off = dr.gather(mi.UInt32, T["b_offset"], bi, active)
-        wrap = dr.gather(mi.UInt32, T["b_wrap"], bi, active)
-        bil = dr.gather(mi.Bool, T["b_bilinear"], bi, active)
-        A = [dr.gather(mi.Float, a, bi, active) for a in T["b_to_uv"]]
-        st = mi.Point2f(A[0] * uv[0] + A[1] * uv[1] + A[2], A[3] * uv[0] + A[4] * uv[1] + A[5])
-        res = mi.Vector2f(size)
-        p = st * res - dr.select(bil, 0.5, 0.0)
-        p0 = dr.floor(p)
-        w = dr.select(bil, p - p0, 0.0)
-        ip = mi.Vector2i(p0)
+        index, w, bil, res, A = self._bitmap_lookup(bi, uv, active)
 
         def texel(dx, dy):
-            q = _wrap(mi.Vector2i(ip.x + dx, ip.y + dy), mi.Vector2i(size), wrap)
-            return dr.gather(mi.Array3f, T["b_raw"], off + mi.UInt32(q.y) * size.x + mi.UInt32(q.x), active)
+            return dr.gather(mi.Array3f, T["b_raw"], index(dx, dy), active)
 
         v00, v10, v01, v11 = texel(0, 0), texel(1, 0), texel(0, 1), texel(1, 1)
         v0 = dr.fma(w.x, v10 - v00, v00)

@@ -241,6 +241,19 @@ class BSDFSet:
         si.wi = frame.to_local(ctx.si.wi)
         return ShadingContext(si, ctx.wl), frame, has
 
+    @staticmethod
+    def _to_perturbed(frame, has, wo):
+        """``wo`` in the perturbed frame, and where it lies on the same side of both
+        surfaces (elsewhere a normal/bump map would leak light)."""
+        wo_p = frame.to_local(wo)
+        return wo_p, ~has | (wo.z * wo_p.z > 0)
+
+    def _perturbed_value(self, frame, has, wo, ok, f, pdf=None):
+        """Apply the shadow-terminator term and the leak mask to values toward ``wo``."""
+        if next(iter(self.pert_shadow)):
+            f = f * dr.select(has, perturb.shadow_terminator(frame.n, wo), 1.0)
+        return dr.select(ok, f, 0.0), (None if pdf is None else dr.select(ok, pdf, 0.0))
+
     def _entry_eval_pdf(self, bsdf_id, ctx, wo, active):
         opacity = self._opacity(bsdf_id, ctx, active)
         bsdf_id, ctx, flip = self._side(bsdf_id, ctx, active)
@@ -249,12 +262,9 @@ class BSDFSet:
         pert = self._perturb(bsdf_id, ctx, active)
         if pert is not None:
             ctx, frame, has = pert
-            wo_p = frame.to_local(wo)
-            ok = ~has | (wo.z * wo_p.z > 0)
+            wo_p, ok = self._to_perturbed(frame, has, wo)
             f, pdf = self._dispatch("eval_pdf", bsdf_id, ctx, active & ok, wo_p)
-            if next(iter(self.pert_shadow)):
-                f = f * dr.select(has, perturb.shadow_terminator(frame.n, wo), 1.0)
-            f, pdf = dr.select(ok, f, 0.0), dr.select(ok, pdf, 0.0)
+            f, pdf = self._perturbed_value(frame, has, wo, ok, f, pdf)
         else:
             f, pdf = self._dispatch("eval_pdf", bsdf_id, ctx, active, wo)
         if opacity is not None:
@@ -274,20 +284,13 @@ class BSDFSet:
         pert = self._perturb(bsdf_id, ctx, active)
         if pert is not None:
             ctx, frame, has = pert
-            wo_p = frame.to_local(wo)
-            ok = ~has | (wo.z * wo_p.z > 0)
+            wo_p, ok = self._to_perturbed(frame, has, wo)
             f, pdf, bs = self._dispatch("eval_pdf_sample", bsdf_id, ctx, active, wo_p, u1, u2)
-            shadowing = next(iter(self.pert_shadow))
-            if shadowing:
-                f = f * dr.select(has, perturb.shadow_terminator(frame.n, wo), 1.0)
-            f, pdf = dr.select(ok, f, 0.0), dr.select(ok, pdf, 0.0)
+            f, pdf = self._perturbed_value(frame, has, wo, ok, f, pdf)
             wo_s = dr.select(has, frame.to_world(bs.wo), bs.wo)
             ok_s = ~has | (bs.wo.z * wo_s.z > 0)
             bs.wo = wo_s
-            w = bs.weight
-            if shadowing:
-                w = w * dr.select(has, perturb.shadow_terminator(frame.n, wo_s), 1.0)
-            bs.weight = dr.select(ok_s, w, 0.0)
+            bs.weight = self._perturbed_value(frame, has, wo_s, ok_s, bs.weight)[0]
             bs.pdf = dr.select(ok_s, bs.pdf, 0.0)
         else:
             f, pdf, bs = self._dispatch("eval_pdf_sample", bsdf_id, ctx, active, wo, u1, u2)
