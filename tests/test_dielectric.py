@@ -9,7 +9,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from bsdf_harness import OneBSDF, direction
+from bsdf_harness import OneBSDF, direction, chi2_rotated
 from pbr.scene.loader import Loader
 from pbr.scene.props import SceneError
 
@@ -37,30 +37,9 @@ def _rough(dist="ggx", alpha=0.3, ior=1.5, **kw):
 # ----------------------------------------------------------------------- chi-square
 
 def _chi2(bsdf, wi, pdf_bsdf=None, test_count=1):
-    """Mitsuba's chi-square test of ``sample`` against ``eval_pdf``'s density. Failed
-    samples (pdf 0) get weight 0; ``pdf_bsdf`` lets a test supply a wrong density.
-
-    The test bins (phi, cos theta): a lobe near a pole of that parameterisation falls in
-    one row of cells (near-normal refraction at alpha 0.3 does) and is neither resolved
-    nor integrated accurately. Directions are therefore rotated (a measure-preserving
-    map) so that the local normal lies on the test's equator, and cells are integrated
-    with 16x16 points."""
-    from mitsuba.chi2 import ChiSquareTest, SphericalDomain
-    b = OneBSDF(bsdf)
-    p = b if pdf_bsdf is None else OneBSDF(pdf_bsdf)
-
-    def sample_func(s):
-        bs = b.sample(wi, s.x, mi.Point2f(s.y, s.z))
-        ok = bs.pdf > 0
-        return mi.Vector3f(bs.wo.x, bs.wo.z, -bs.wo.y), dr.select(ok, 1.0, 0.0)
-
-    def pdf_func(v):
-        return p.eval_pdf(wi, mi.Vector3f(v.x, -v.z, v.y))[1]
-
-    t = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
-                      sample_dim=3, sample_count=200_000, res=101, ires=16)
-    return t.run(test_count=test_count, quiet=True), t.messages
-
+    """(passed, messages) of bsdf_harness.chi2_rotated (see there for why directions are rotated)."""
+    ok, _, msg = chi2_rotated(bsdf, wi, pdf_bsdf, test_count)
+    return ok, msg
 
 # Every distribution x roughness x incidence angle, from outside and inside, with the
 # three IORs cycled through the cases (a full product would take minutes).

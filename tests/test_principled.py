@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import pbr
-from bsdf_harness import OneBSDF, direction
+from bsdf_harness import OneBSDF, direction, chi2_rotated
 from mitsuba_scenes import compare_with_mitsuba, material_box
 from pbr.bsdfs import principled as principled_module
 from pbr.scene.props import SceneError
@@ -120,24 +120,9 @@ def test_texture_parameters_match_mitsuba(tmp_path):
 # ----------------------------------------------------------------- chi-square
 
 def _chi2(bsdf, wi, pdf_bsdf=None):
-    """Mitsuba's chi-square test of ``sample`` against ``eval_pdf``'s density, with the
-    directions rotated so that the local normal lies on the test's equator (sharp lobes
-    near the pole of the (phi, cos theta) grid are not resolved otherwise)."""
-    from mitsuba.chi2 import ChiSquareTest, SphericalDomain
-    b = _BSDF(bsdf)
-    p = b if pdf_bsdf is None else _BSDF(pdf_bsdf)
-
-    def sample_func(s):
-        bs = b.sample(wi, s.x, mi.Point2f(s.y, s.z))
-        return mi.Vector3f(bs.wo.x, bs.wo.z, -bs.wo.y), dr.select(bs.pdf > 0, 1.0, 0.0)
-
-    def pdf_func(v):
-        return p.eval_pdf(wi, mi.Vector3f(v.x, -v.z, v.y))[1]
-
-    t = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
-                      sample_dim=3, sample_count=200_000, res=101, ires=16)
-    return t.run(test_count=len(_CHI2), quiet=True), t.messages
-
+    """(passed, messages) of bsdf_harness.chi2_rotated (see there for why directions are rotated)."""
+    ok, _, msg = chi2_rotated(bsdf, wi, pdf_bsdf, len(_CHI2), make=_BSDF)
+    return ok, msg
 
 _CHI2 = [
     ("diffuse", {"type": "principled", "base_color": 0.8, "roughness": 0.8, "specular": 0.0}, 30),

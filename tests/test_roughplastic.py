@@ -9,7 +9,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from bsdf_harness import OneBSDF, direction
+from bsdf_harness import OneBSDF, direction, chi2_rotated
 from mitsuba_scenes import compare_with_mitsuba, material_box
 from pbr.bsdfs import roughplastic as rp
 from pbr.scene.props import SceneError
@@ -42,29 +42,8 @@ def _mi_si(wi, n):
 # ----------------------------------------------------------------------- chi-square
 
 def _chi2(bsdf, wi, pdf_bsdf=None, test_count=1, seed=0):
-    """Mitsuba's chi-square test of ``sample`` against ``eval_pdf``'s density (failed
-    samples weigh 0). The test's (phi, cos theta) cells are degenerate at the poles,
-    where the glossy lobe of near-normal incidence lies: directions are rotated (a
-    measure-preserving map) so that the local normal lies on the test's equator, and
-    cells are integrated with 16x16 points; ``seed`` varies the random numbers (with
-    one seed, tests of lobes that share a diffuse part share its samples and their
-    p-values are correlated). Returns (passed, p-value, messages)."""
-    from mitsuba.chi2 import ChiSquareTest, SphericalDomain
-    b = OneBSDF(bsdf)
-    p = b if pdf_bsdf is None else OneBSDF(pdf_bsdf)
-
-    def sample_func(s):
-        bs = b.sample(wi, s.x, mi.Point2f(s.y, s.z))
-        return mi.Vector3f(bs.wo.x, bs.wo.z, -bs.wo.y), dr.select(bs.pdf > 0, 1.0, 0.0)
-
-    def pdf_func(v):
-        return p.eval_pdf(wi, mi.Vector3f(v.x, -v.z, v.y))[1]
-
-    t = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
-                      sample_dim=3, sample_count=200_000, res=101, ires=16, seed=seed)
-    ok = t.run(test_count=test_count, quiet=True)
-    return ok, getattr(t, "p_value", float("nan")), t.messages
-
+    """bsdf_harness.chi2_rotated: (passed, p-value, messages)."""
+    return chi2_rotated(bsdf, wi, pdf_bsdf, test_count, seed)
 
 _CHI2 = [(d, a, th, v) for d in ("beckmann", "ggx") for a, th in ((0.1, 0), (0.1, 60), (0.3, 30), (0.3, 85),
                                                                    (0.8, 45), (0.8, 89))
