@@ -9,7 +9,6 @@ passes with seed ``seed_grad`` and ``spp_grad`` samples, decorrelated from the p
 from __future__ import annotations
 
 import drjit as dr
-import mitsuba as mi
 
 from . import backend
 

@@ -564,7 +564,7 @@ def _load(loader, value, path: str, emitter: bool, unbounded: bool = False) -> i
         texs.items[slot].children = {"tex1": x, "tex2": y, "amount": m}
         return slot
     if t == "bitmap":
-        from .image import read_image, srgb_to_linear
+        from .image import read_image
         filter_type = p.string("filter_type", "bilinear", choices=("bilinear", "nearest"))
         wrap_mode = p.string("wrap_mode", "repeat", choices=("repeat", "mirror", "clamp"))
         raw = p.bool("raw", False)

@@ -11,7 +11,6 @@ their parameters in one structure-of-arrays table, indexed by ``idx`` in kernels
 
 from __future__ import annotations
 
-import drjit as dr
 import mitsuba as mi
 
 from ..backend import VariantStruct

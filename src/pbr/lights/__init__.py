@@ -22,7 +22,6 @@ from .infinite import ConstantLight, EnvMapLight, PortalEnvMapLight
 from .directionalarea import DirectionalAreaLight
 from .base import LightSample, LightType  # noqa: F401
 from .lightsamplers import make_light_sampler, LightTable, LIGHT_SAMPLERS  # noqa: F401
-from ..scene.props import SceneError
 
 LIGHT_TYPES: dict[str, type] = {"area": AreaLight}
 LIGHT_TYPES.update(constant=ConstantLight, envmap=EnvMapLight, portalenvmap=PortalEnvMapLight,

@@ -69,7 +69,6 @@ import mitsuba as mi
 import numpy as np
 
 from .. import spectrum as spec
-from ..scene.props import SceneError
 from ..textures import load_spectrum, BITMAP, CHECKERBOARD, COMPOSITE, OP_SCALE, OP_CHECKER
 from .base import LightType, LightSample
 
