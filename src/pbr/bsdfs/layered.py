@@ -92,6 +92,34 @@ def _tr(dz, w):
     return dr.select(dr.abs(dz) <= _FLT_MIN, 1.0, dr.exp(-dr.abs(dz / w.z)))
 
 
+def _free_flight(cur, z, w, beta, thick, g, in_medium, u_dz, u, medium: bool):
+    """One step of a layered random walk from height ``z`` along ``w`` (lanes ``cur``).
+
+    Without a medium (or where ``in_medium`` is false) the walk crosses the slab to the
+    other interface, attenuated by its transmittance. In a medium an exponential free
+    flight either stops inside (``inside``; ``scat`` where the presampled HG direction
+    ``ps_w`` is usable) or reaches an interface. A zero free flight (u = 0) is neither: it
+    is drawn again at the next event (pbrt-v4 fails it, a 2^-24 chance per event and an
+    energy loss). Returns (cur: lanes now at an interface, z, beta, zp: the flight's end,
+    inside, scat, ps_w, ps_pdf)."""
+    flip_z = dr.select(z == thick, 0.0, thick)
+    if not medium:
+        z = dr.select(cur, flip_z, z)
+        beta = dr.select(cur, beta * _tr(thick, w), beta)
+        return cur, z, beta, z, mi.Bool(False), mi.Bool(False), mi.Vector3f(w), mi.Float(0.0)
+    med = cur & in_medium
+    dz = -dr.log(1.0 - u_dz) * dr.abs(w.z)
+    zp = dr.select(w.z > 0, z + dz, z - dz)
+    same = med & (zp == z)
+    inside = med & ~same & (zp > 0) & (zp < thick)
+    ps_w, ps_pdf = hg_sample(-w, g, u)
+    scat = inside & (ps_pdf > 0) & (ps_w.z != 0)
+    cur = cur & ~(same | inside)
+    z = dr.select(cur, dr.select(med, dr.clip(zp, 0.0, thick), flip_z), z)
+    beta = dr.select(cur & ~med, beta * _tr(thick, w), beta)
+    return cur, z, beta, zp, inside, scat, ps_w, ps_pdf
+
+
 def _kind(kinds):
     kinds = set(kinds)
     return kinds.pop() if len(kinds) == 1 else MIXED
@@ -360,21 +388,8 @@ class _Layered(BSDFType):
                 alive = alive & (~(rr & (u_rr < q)))
                 beta = dr.select(rr, beta / (1.0 - q), beta)
                 cur = mi.Bool(alive)
-                flip_z = dr.select(z == thick, 0.0, thick)
-                if medium:
-                    med = cur & P.medium
-                    dz = -dr.log(1.0 - u_dz) * dr.abs(w.z)
-                    zp = dr.select(w.z > 0, z + dz, z - dz)
-                    same = med & (zp == z)
-                    inside = med & ~same & (zp > 0) & (zp < thick)
-                    ps_w, ps_pdf = hg_sample(-w, g, u)
-                    scat = inside & (ps_pdf > 0) & (ps_w.z != 0)
-                    cur = cur & (~(same | inside))
-                    z = dr.select(cur, dr.select(med, dr.clip(zp, 0.0, thick), flip_z), z)
-                    beta = dr.select(cur & ~med, beta * _tr(thick, w), beta)
-                else:
-                    z = dr.select(cur, flip_z, z)
-                    beta = dr.select(cur, beta * _tr(thick, w), beta)
+                cur, z, beta, zp, inside, scat, ps_w, ps_pdf = _free_flight(
+                    cur, z, w, beta, thick, g, P.medium, u_dz, u, medium)
                 at_top = cur & (z == thick)
                 at_bot = cur & (z != thick)
 
@@ -491,24 +506,10 @@ class _Layered(BSDFType):
             beta = dr.select(rr, beta / (1.0 - q), beta)
             pdf = dr.select(rr, pdf * (1.0 - q), pdf)
             cur = mi.Bool(alive)
-            flip_z = dr.select(z == thick, 0.0, thick)
+            cur, z, beta, zp, inside, scat, ps_w, ps_pdf = _free_flight(
+                cur, z, w, beta, thick, g, P.medium, u_dz, u, medium)
             if medium:
-                med = cur & P.medium
-                dz = -dr.log(1.0 - u_dz) * dr.abs(w.z)
-                zp = dr.select(w.z > 0, z + dz, z - dz)
-                # A zero free flight (u = 0) is drawn again at the next event (pbrt-v4
-                # fails the sample: a 2^-24 chance per event, an energy loss).
-                cur = cur & ~(med & (zp == z))
-                inside = cur & med & (zp > 0) & (zp < thick)
-                ps_w, ps_pdf = hg_sample(-w, g, u)
-                scat = inside & (ps_pdf > 0) & (ps_w.z != 0)
                 alive = alive & (~(inside & ~scat))
-                cur = cur & ~inside
-                z = dr.select(cur, dr.select(med, dr.clip(zp, 0.0, thick), flip_z), z)
-                beta = dr.select(cur & ~med, beta * _tr(thick, w), beta)
-            else:
-                z = dr.select(cur, flip_z, z)
-                beta = dr.select(cur, beta * _tr(thick, w), beta)
             at_top = cur & (z == thick)
             at_bot = cur & (z != thick)
             st = top.sample(-w, uc, u)
