@@ -241,6 +241,15 @@ class BSDFSet:
         si.wi = frame.to_local(ctx.si.wi)
         return ShadingContext(si, ctx.wl), frame, has
 
+    def _resolve(self, bsdf_id, ctx, wo, active):
+        """Apply the entry attributes that change the frame: the side (twosided, with
+        ``wo`` mirrored alongside) and the normal/bump perturbation. Returns (entry,
+        context, wo, flip mask or None, perturbation or None)."""
+        bsdf_id, ctx, flip = self._side(bsdf_id, ctx, active)
+        if flip is not None:
+            wo = _flip(wo, flip)
+        return bsdf_id, ctx, wo, flip, self._perturb(bsdf_id, ctx, active)
+
     @staticmethod
     def _to_perturbed(frame, has, wo):
         """``wo`` in the perturbed frame, and where it lies on the same side of both
@@ -256,10 +265,7 @@ class BSDFSet:
 
     def _entry_eval_pdf(self, bsdf_id, ctx, wo, active):
         opacity = self._opacity(bsdf_id, ctx, active)
-        bsdf_id, ctx, flip = self._side(bsdf_id, ctx, active)
-        if flip is not None:
-            wo = _flip(wo, flip)
-        pert = self._perturb(bsdf_id, ctx, active)
+        bsdf_id, ctx, wo, flip, pert = self._resolve(bsdf_id, ctx, wo, active)
         if pert is not None:
             ctx, frame, has = pert
             wo_p, ok = self._to_perturbed(frame, has, wo)
@@ -278,10 +284,7 @@ class BSDFSet:
             # Pass straight through with probability 1 - opacity; reuse u1 otherwise.
             through = u1 >= opacity
             u1 = dr.select(through, u1, u1 / dr.maximum(opacity, 1e-12))
-        bsdf_id, ctx, flip = self._side(bsdf_id, ctx, active)
-        if flip is not None:
-            wo = _flip(wo, flip)
-        pert = self._perturb(bsdf_id, ctx, active)
+        bsdf_id, ctx, wo, flip, pert = self._resolve(bsdf_id, ctx, wo, active)
         if pert is not None:
             ctx, frame, has = pert
             wo_p, ok = self._to_perturbed(frame, has, wo)
