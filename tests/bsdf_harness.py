@@ -109,3 +109,44 @@ def chi2_rotated(bsdf: dict, wi, pdf_bsdf: dict | None = None, test_count: int =
                       sample_dim=3, sample_count=sample_count, res=101, ires=16, seed=seed)
     ok = t.run(test_count=test_count, quiet=True)
     return ok, getattr(t, "p_value", float("nan")), t.messages
+
+
+def random_samples(n, seed=7):
+    """(u1, u2) uniform samples for ``sample`` calls."""
+    rng = mi.PCG32(n, seed)
+    return rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32())
+
+
+def random_directions(n, seed=3, upper=False):
+    """``n`` uniformly distributed unit vectors (on the upper hemisphere if ``upper``)."""
+    v = np.random.default_rng(seed).normal(size=(3, n))
+    v /= np.linalg.norm(v, axis=0)
+    if upper:
+        v[2] = np.abs(v[2])
+    return mi.Vector3f(*[mi.Float(x) for x in v])
+
+
+def shared_family_results(bsdfs, wi, wo, samples=None, make=None):
+    """Load several BSDF dicts into one scene (so instances of a family share one
+    parameter table) and yield, per instance, the values through the shared table next to
+    the instance loaded alone: dicts with f, pdf, f_alone, pdf_alone and, when ``samples``
+    (u1, u2) are given, bs and bs_alone."""
+    make = make or OneBSDF
+    loader = Loader({"type": "scene"})
+    ids = [loader.bsdf(dict(d), f"scene.b{i}") for i, d in enumerate(bsdfs)]
+    loader.textures.build()
+    loader.bsdfs.build(loader.textures)
+    n = dr.width(wo)
+    one = make(bsdfs[0])
+    for i, d in zip(ids, bsdfs):
+        alone = make(d)
+        sel = mi.UInt32(i) + dr.zeros(mi.UInt32, n)
+        ctx = one.ctx(mi.Vector3f(wi) + dr.zeros(mi.Vector3f, n), n)
+        f, pdf = loader.bsdfs.eval_pdf(sel, ctx, wo, mi.Bool(True))
+        fa, pa = alone.eval_pdf(wi, wo)
+        r = {"f": np.array(f), "pdf": np.array(pdf), "f_alone": np.array(fa), "pdf_alone": np.array(pa)}
+        if samples is not None:
+            u1, u2 = samples
+            r["bs"] = loader.bsdfs.sample(sel, ctx, u1, u2, mi.Bool(True))
+            r["bs_alone"] = alone.sample(wi, u1, u2)
+        yield r

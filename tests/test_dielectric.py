@@ -9,16 +9,10 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from bsdf_harness import OneBSDF, direction, chi2_rotated
-from pbr.scene.loader import Loader
+from bsdf_harness import OneBSDF, direction, chi2_rotated, random_directions, random_samples, shared_family_results
 from pbr.scene.props import SceneError
 
 N_FURNACE = 1 << 18
-
-
-def _u(n, seed=7):
-    rng = mi.PCG32(n, seed)
-    return rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32())
 
 
 def _rough(dist="ggx", alpha=0.3, ior=1.5, **kw):
@@ -91,12 +85,6 @@ def _mi_si(wi, n):
     return si
 
 
-def _sphere(n, seed=3):
-    v = np.random.default_rng(seed).normal(size=(3, n))
-    v /= np.linalg.norm(v, axis=0)
-    return mi.Vector3f(*[mi.Float(x) for x in v])
-
-
 @pytest.mark.parametrize("d", [
     _rough("ggx", 0.3, 1.5), _rough("ggx", (0.1, 0.5), (1.0, 1.33), specular_reflectance=0.7),
     # Beckmann: pbr samples D cos (Mitsuba's sample_visible=False density) either way.
@@ -104,7 +92,7 @@ def _sphere(n, seed=3):
     _rough("ggx", 0.8, 1.5, sample_visible=False)])
 @pytest.mark.parametrize("theta", [20, 80, 110, 170])
 def test_rough_eval_pdf_matches_mitsuba(d, theta):
-    wi, wo = direction(theta, 30), _sphere(20_000)
+    wi, wo = direction(theta, 30), random_directions(20_000)
     f, pdf = OneBSDF(d).eval_pdf(wi, wo)
     fm, pm = mi.load_dict(d).eval_pdf(mi.BSDFContext(), _mi_si(wi, 20_000), wo)
     f, fm = np.array(f)[0], np.array(fm)[0]
@@ -120,7 +108,7 @@ def test_rough_eval_pdf_matches_mitsuba(d, theta):
 def test_smooth_sample_matches_mitsuba(d, theta):
     n = 4096
     wi = direction(theta, 50)
-    u1, u2 = _u(n)
+    u1, u2 = random_samples(n)
     bs = OneBSDF(d).sample(wi, u1, u2)
     bm, wm = mi.load_dict(d).sample(mi.BSDFContext(), _mi_si(wi, n), u1, u2)
     assert np.all(np.array(bs.delta))
@@ -146,7 +134,7 @@ def _fresnel_np(c, eta):
 
 
 def _furnace(d, wi, n=N_FURNACE):
-    u1, u2 = _u(n)
+    u1, u2 = random_samples(n)
     bs = OneBSDF(d).sample(wi, u1, u2)
     w = np.array(bs.weight)
     eta = np.array(bs.eta)
@@ -205,7 +193,7 @@ def test_rough_weights_equal_eval_over_pdf():
     for d, theta in [(_rough("ggx", 0.3, 1.5), 40), (_rough("beckmann", (0.2, 0.4), 1.33), 140),
                      (_rough("ggx", 0.5, (1.0, 1.5), specular_transmittance=0.5), 70)]:
         b, wi = OneBSDF(d), direction(theta, 15)
-        u1, u2 = _u(50_000)
+        u1, u2 = random_samples(50_000)
         bs = b.sample(wi, u1, u2)
         f, pdf = b.eval_pdf(wi, bs.wo)
         ok = np.array(bs.pdf) > 0
@@ -221,8 +209,8 @@ def test_rough_weights_equal_eval_over_pdf():
 def _pairs(b, reflected, n=8000):
     """(wi, wo) pairs with wo sampled from the BSDF for random wi (both sides), keeping
     reflected or transmitted ones away from grazing angles."""
-    wi = _sphere(n, seed=5)
-    u1, u2 = _u(n)
+    wi = random_directions(n, seed=5)
+    u1, u2 = random_samples(n)
     bs = b.sample(wi, u1, u2)
     a, c = np.array(wi), np.array(bs.wo)
     keep = (np.array(bs.pdf) > 0) & ((a[2] * c[2] > 0) == reflected) & (np.abs(a[2]) > 0.05) & (np.abs(c[2]) > 0.05)
@@ -277,8 +265,8 @@ def test_extremes_are_finite_and_bounded(family, alpha, ior):
         d = _rough(family[:-8] if family.endswith("_no_vndf") else family, alpha, ior,
                    sample_visible=not family.endswith("_no_vndf"))
     b = OneBSDF(d)
-    u1, u2 = _u(1 << 14)
-    wo = _sphere(1 << 14)
+    u1, u2 = random_samples(1 << 14)
+    wo = random_directions(1 << 14)
     for c in _EXTREME_COS:
         wi = mi.Vector3f(math.sqrt(1 - c * c), 0.0, c)
         bs = b.sample(wi, u1, u2)
@@ -318,23 +306,11 @@ def test_mixed_instances_in_one_family():
     family table and give the values each gives alone."""
     ds = [_rough("ggx", 0.3, 1.5), _rough("beckmann", (0.2, 0.5), 1.33, specular_transmittance=0.5),
           _rough("ggx", 0.6, 1.2, sample_visible=False, specular_reflectance=0.3)]
-    loader = Loader({"type": "scene"})
-    ids = [loader.bsdf(dict(d), f"scene.b{i}") for i, d in enumerate(ds)]
-    loader.textures.build()
-    loader.bsdfs.build(loader.textures)
-    wi, wo, n = direction(50, 20), _sphere(5000), 5000
-    u1, u2 = _u(n)
-    one = OneBSDF(ds[0])
-    for i, d in zip(ids, ds):
-        alone = OneBSDF(d)
-        sel = mi.UInt32(i) + dr.zeros(mi.UInt32, n)
-        ctx = one.ctx(mi.Vector3f(wi) + dr.zeros(mi.Vector3f, n), n)
-        f, pdf = loader.bsdfs.eval_pdf(sel, ctx, wo, mi.Bool(True))
-        fa, pa = alone.eval_pdf(wi, wo)
-        assert np.allclose(np.array(f), np.array(fa), rtol=1e-5, atol=1e-7)
-        assert np.allclose(np.array(pdf), np.array(pa), rtol=1e-5, atol=1e-7)
-        bs = loader.bsdfs.sample(sel, ctx, u1, u2, mi.Bool(True))
-        ba = alone.sample(wi, u1, u2)
+    n = 5000
+    for r in shared_family_results(ds, direction(50, 20), random_directions(n), samples=random_samples(n)):
+        assert np.allclose(r["f"], r["f_alone"], rtol=1e-5, atol=1e-7)
+        assert np.allclose(r["pdf"], r["pdf_alone"], rtol=1e-5, atol=1e-7)
+        bs, ba = r["bs"], r["bs_alone"]
         assert np.allclose(np.array(bs.weight), np.array(ba.weight), rtol=1e-5, atol=1e-7)
         assert np.allclose(np.array(bs.wo), np.array(ba.wo), atol=1e-6)
 

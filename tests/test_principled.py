@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import pbr
-from bsdf_harness import OneBSDF, direction, chi2_rotated
+from bsdf_harness import OneBSDF, direction, chi2_rotated, random_directions, random_samples, shared_family_results
 from mitsuba_scenes import compare_with_mitsuba, material_box
 from pbr.bsdfs import principled as principled_module
 from pbr.scene.props import SceneError
@@ -31,17 +31,6 @@ class _BSDF(OneBSDF):
         c = super().ctx(wi, n)
         c.si.uv = mi.Point2f(*UV)
         return c
-
-
-def _sphere(n, seed=3):
-    v = np.random.default_rng(seed).normal(size=(3, n))
-    v /= np.linalg.norm(v, axis=0)
-    return mi.Vector3f(*[mi.Float(x) for x in v])
-
-
-def _u(n, seed=7):
-    rng = mi.PCG32(n, seed)
-    return rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32())
 
 
 # ------------------------------------------------------------- against Mitsuba
@@ -78,7 +67,7 @@ def _mi_si(wi, n):
 
 
 def _against_mitsuba(d, theta, n=20_000):
-    wi, wo = direction(theta, 30), _sphere(n)
+    wi, wo = direction(theta, 30), random_directions(n)
     f, pdf = _BSDF(d, lam=LAM).eval_pdf(wi, wo)
     m, ctx = mi.load_dict(d), mi.BSDFContext()
     fm, pm = m.eval(ctx, _mi_si(wi, n), wo), m.pdf(ctx, _mi_si(wi, n), wo)
@@ -158,7 +147,7 @@ def test_chi2_rejects_a_wrong_density():
 def _albedo(d, theta, n=1 << 18):
     """Mean energy weight (weight * eta^2: the radiance scale of refraction undone)
     and its standard error."""
-    u1, u2 = _u(n)
+    u1, u2 = random_samples(n)
     bs = _BSDF(d).sample(direction(theta, 20), u1, u2)
     e = np.array(bs.weight)[0].astype(np.float64) * np.array(bs.eta) ** 2
     assert np.all(np.isfinite(e)) and np.all(e >= 0)
@@ -230,8 +219,8 @@ def test_documented_energy_gain():
 def test_extremes_are_finite(d, roughness):
     b = _BSDF({**d, "roughness": roughness})
     n = 1 << 14
-    u1, u2 = _u(n)
-    wo = _sphere(n)
+    u1, u2 = random_samples(n)
+    wo = random_directions(n)
     for c in (1e-6, -1e-6, 1e-3, -1e-3, 0.5, -0.5, 1.0, -1.0):
         wi = mi.Vector3f(math.sqrt(1 - c * c), 0.0, c)
         bs = b.sample(wi, u1, u2)
@@ -259,7 +248,7 @@ def test_sampling_statistics_match_mitsuba(name):
     m = mi.load_dict(d)
     for theta in (30, 80, 130):
         wi = direction(theta, 30)
-        u1, u2 = _u(n)
+        u1, u2 = random_samples(n)
         w = np.array(_BSDF(d, lam=LAM).sample(wi, u1, u2).weight)
         wm = np.array(m.sample(mi.BSDFContext(), _mi_si(wi, n), u1, u2)[1])
         ok, okm = np.any(w > 0, axis=0), np.any(wm > 0, axis=0)
@@ -273,7 +262,7 @@ def test_sampling_statistics_match_mitsuba(name):
 def test_weights_equal_eval_over_pdf():
     for d, theta in [(_PRINCIPLED["all_lobes"], 40), (_PRINCIPLED["glass_mix"], 130), (_PRINCIPLED["thin_all"], 60)]:
         b, wi = _BSDF(d), direction(theta, 15)
-        u1, u2 = _u(50_000)
+        u1, u2 = random_samples(50_000)
         bs = b.sample(wi, u1, u2)
         f, pdf = b.eval_pdf(wi, bs.wo)
         ok = np.array(bs.pdf) > 0
@@ -307,21 +296,10 @@ def test_specular_maps_to_eta_and_zero_lobes_are_off():
 def test_mixed_instances_in_one_family():
     """Instances with and without optional lobes share one table and give what each
     gives alone."""
-    from pbr.scene.loader import Loader
     ds = [_PRINCIPLED["default"], _PRINCIPLED["all_lobes"], _PRINCIPLED["glass_mix"]]
-    loader = Loader({"type": "scene"})
-    ids = [loader.bsdf(dict(d), f"scene.b{i}") for i, d in enumerate(ds)]
-    loader.textures.build()
-    loader.bsdfs.build(loader.textures)
-    n, wi, wo = 5000, direction(50, 20), _sphere(5000)
-    one = _BSDF(ds[0])
-    for i, d in zip(ids, ds):
-        sel = mi.UInt32(i) + dr.zeros(mi.UInt32, n)
-        ctx = one.ctx(mi.Vector3f(wi) + dr.zeros(mi.Vector3f, n), n)
-        f, pdf = loader.bsdfs.eval_pdf(sel, ctx, wo, mi.Bool(True))
-        fa, pa = _BSDF(d).eval_pdf(wi, wo)
-        assert np.allclose(np.array(f), np.array(fa), rtol=1e-5, atol=1e-7)
-        assert np.allclose(np.array(pdf), np.array(pa), rtol=1e-5, atol=1e-7)
+    for r in shared_family_results(ds, direction(50, 20), random_directions(5000), make=_BSDF):
+        assert np.allclose(r["f"], r["f_alone"], rtol=1e-5, atol=1e-7)
+        assert np.allclose(r["pdf"], r["pdf_alone"], rtol=1e-5, atol=1e-7)
 
 
 # ---------------------------------------------------------------------- images

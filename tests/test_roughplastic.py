@@ -9,7 +9,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-from bsdf_harness import OneBSDF, direction, chi2_rotated
+from bsdf_harness import OneBSDF, direction, chi2_rotated, random_directions, random_samples, shared_family_results
 from mitsuba_scenes import compare_with_mitsuba, material_box
 from pbr.bsdfs import roughplastic as rp
 from pbr.scene.props import SceneError
@@ -17,18 +17,6 @@ from pbr.scene.props import SceneError
 
 def _rp(dist="beckmann", alpha=0.1, **kw):
     return {"type": "roughplastic", "distribution": dist, "alpha": alpha, **kw}
-
-
-def _u(n, seed=7):
-    rng = mi.PCG32(n, seed)
-    return rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32())
-
-
-def _hemisphere(n, seed=3):
-    v = np.random.default_rng(seed).normal(size=(3, n))
-    v /= np.linalg.norm(v, axis=0)
-    v[2] = np.abs(v[2])
-    return mi.Vector3f(*[mi.Float(x) for x in v])
 
 
 def _mi_si(wi, n):
@@ -74,7 +62,7 @@ def test_chi2_rejects_a_wrong_density():
 def test_weights_are_eval_over_pdf():
     for d, theta in [(_rp("ggx", 0.3), 40), (_rp("beckmann", 0.1, nonlinear=True), 75)]:
         b, wi = OneBSDF(d), direction(theta, 15)
-        u1, u2 = _u(50_000)
+        u1, u2 = random_samples(50_000)
         bs = b.sample(wi, u1, u2)
         f, pdf = b.eval_pdf(wi, bs.wo)
         ok = np.array(bs.pdf) > 0
@@ -86,7 +74,7 @@ def test_weights_are_eval_over_pdf():
 # ------------------------------------------------------------------------- energy
 
 def _albedo(d, wi, n=1 << 19):
-    u1, u2 = _u(n)
+    u1, u2 = random_samples(n)
     w = np.array(OneBSDF(d).sample(wi, u1, u2).weight)[0].astype(np.float64)
     return w.mean(), w.std() / math.sqrt(n)
 
@@ -126,7 +114,7 @@ def test_sampled_albedo_equals_integral_of_eval(d, theta):
 
 
 def _mitsuba_albedo(d, wi, n=1 << 19):
-    u1, u2 = _u(n, seed=11)
+    u1, u2 = random_samples(n, seed=11)
     w = np.array(mi.load_dict(d).sample(mi.BSDFContext(), _mi_si(wi, n), u1, u2)[1])[0].astype(np.float64)
     return w.mean(), w.std() / math.sqrt(n)
 
@@ -155,7 +143,7 @@ def test_eval_matches_mitsuba(d, theta):
     (the same sampling scheme) to 2%: the glossy lobe's probability is proportional to
     1 - T(cos_i), which amplifies the table differences (0.8% at normal incidence)."""
     n = 20_000
-    wi, wo = direction(theta, 30), _hemisphere(n)
+    wi, wo = direction(theta, 30), random_directions(upper=True, n=n)
     m = mi.load_dict(d)
     f, pdf = OneBSDF(d).eval_pdf(wi, wo)
     fm, pm = m.eval_pdf(mi.BSDFContext(), _mi_si(wi, n), wo)
@@ -284,8 +272,8 @@ def test_table_interpolation_is_linear_over_64_nodes():
 def test_extremes_are_finite_and_bounded(dist, visible, alpha, ior):
     b = OneBSDF(_rp(dist, alpha, sample_visible=visible, int_ior=ior, ext_ior=1.0, diffuse_reflectance=1.0))
     n = 1 << 16
-    u1, u2 = _u(n)
-    wo = _hemisphere(n)
+    u1, u2 = random_samples(n)
+    wo = random_directions(upper=True, n=n)
     for c in (1e-6, 1e-3, 0.5, 1.0, -0.5):
         wi = mi.Vector3f(math.sqrt(1 - c * c), 0.0, c)
         bs = b.sample(wi, u1, u2)
@@ -333,32 +321,20 @@ def test_invalid_parameters_name_the_key(d, key, text):
 def test_isotropic_alpha_u_v_is_accepted():
     a = OneBSDF({"type": "roughplastic", "alpha_u": 0.2, "alpha_v": 0.2})
     b = OneBSDF({"type": "roughplastic", "alpha": 0.2})
-    wo = _hemisphere(1000)
+    wo = random_directions(upper=True, n=1000)
     assert np.allclose(np.array(a.eval_pdf(direction(30), wo)[0]), np.array(b.eval_pdf(direction(30), wo)[0]))
 
 
 def test_mixed_instances_in_one_family():
     """GGX/Beckmann, visible/D cos sampling and textured instances share one family
     table and give the values each gives alone."""
-    from pbr.scene.loader import Loader
     ds = [_rp("ggx", 0.3), _rp("beckmann", 0.2, int_ior=1.7, nonlinear=True),
           _rp("ggx", 0.6, sample_visible=False, diffuse_reflectance={"type": "rgb", "value": [0.2, 0.5, 0.9]})]
-    loader = Loader({"type": "scene"})
-    ids = [loader.bsdf(dict(d), f"scene.b{i}") for i, d in enumerate(ds)]
-    loader.textures.build()
-    loader.bsdfs.build(loader.textures)
-    n, wi, wo = 4000, direction(50, 20), _hemisphere(4000)
-    u1, u2 = _u(n)
-    one = OneBSDF(ds[0])
-    for i, d in zip(ids, ds):
-        alone = OneBSDF(d)
-        sel = mi.UInt32(i) + dr.zeros(mi.UInt32, n)
-        ctx = one.ctx(mi.Vector3f(wi) + dr.zeros(mi.Vector3f, n), n)
-        f, pdf = loader.bsdfs.eval_pdf(sel, ctx, wo, mi.Bool(True))
-        fa, pa = alone.eval_pdf(wi, wo)
-        assert np.allclose(np.array(f), np.array(fa), rtol=1e-5, atol=1e-7)
-        assert np.allclose(np.array(pdf), np.array(pa), rtol=1e-5, atol=1e-7)
-        bs, ba = loader.bsdfs.sample(sel, ctx, u1, u2, mi.Bool(True)), alone.sample(wi, u1, u2)
+    n = 4000
+    for r in shared_family_results(ds, direction(50, 20), random_directions(upper=True, n=n), samples=random_samples(n)):
+        assert np.allclose(r["f"], r["f_alone"], rtol=1e-5, atol=1e-7)
+        assert np.allclose(r["pdf"], r["pdf_alone"], rtol=1e-5, atol=1e-7)
+        bs, ba = r["bs"], r["bs_alone"]
         # (float32 rounding differs between the two kernels)
         assert np.allclose(np.array(bs.weight), np.array(ba.weight), rtol=1e-4, atol=1e-7)
         assert np.allclose(np.array(bs.wo), np.array(ba.wo), atol=1e-5)
