@@ -1,5 +1,7 @@
 """Shared test scenes for comparisons with Mitsuba (pbr.validate)."""
 
+import os
+
 import numpy as np
 import mitsuba as mi
 
@@ -7,6 +9,32 @@ import pbr
 from pbr import validate
 
 RES, SPP, BATCHES = 24, 1024, 16
+
+
+def gradient_png(tmp_path) -> str:
+    """An 8x8 colour-gradient PNG (a bitmap texture for comparisons); returns its path."""
+    img = np.zeros((8, 8, 3), np.float32)
+    img[..., 0] = np.linspace(0.05, 0.9, 8)[None, :]
+    img[..., 1] = np.linspace(0.9, 0.1, 8)[:, None]
+    img[..., 2] = 0.3
+    png = str(tmp_path / "tex.png")
+    pbr.write_image(png, img)
+    return png
+
+
+def run_notebook(path: str, replace: dict | None = None) -> dict:
+    """Execute a notebook's code cells in order (after the textual ``replace``ments, e.g.
+    smaller sizes) and return its namespace. No Jupyter needed."""
+    import json
+    nb = json.load(open(path))
+    ns = {}
+    for cell in nb["cells"]:
+        if cell["cell_type"] == "code":
+            src = "".join(cell["source"])
+            for a, b in (replace or {}).items():
+                src = src.replace(a, b)
+            exec(compile(src, os.path.basename(path), "exec"), ns)
+    return ns
 
 
 def sky_image(h=16, w=32):

@@ -1,11 +1,11 @@
 """The shipped scene file and notebook keep working."""
 
-import json
 import os
 
 import numpy as np
 
 import pbr
+from mitsuba_scenes import run_notebook
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -18,12 +18,7 @@ def test_scene_file_equals_builtin_cornell_box():
 
 def test_quickstart_notebook_runs(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    nb = json.load(open(os.path.join(ROOT, "notebooks", "quickstart.ipynb")))
-    ns = {}
-    for cell in nb["cells"]:
-        if cell["cell_type"] == "code":
-            src = "".join(cell["source"])
-            exec(compile(src, "quickstart.ipynb", "exec"), ns)
+    ns = run_notebook(os.path.join(ROOT, "notebooks", "quickstart.ipynb"))
     assert os.path.exists(tmp_path / "out" / "notebook_cornell.png")
     red_wall = np.asarray(ns["img"])[64, 5]
     blue_wall = np.asarray(ns["img2"])[64, 5]

@@ -1,12 +1,12 @@
 """The materials gallery (every BSDF family) and the dict -> XML writer."""
 
-import json
 import os
 
 import numpy as np
 import mitsuba as mi
 
 import pbr
+from mitsuba_scenes import run_notebook
 from pbr.scene.xml import to_xml, parse_string
 from pbr.bsdfs import BSDF_TYPES
 
@@ -44,10 +44,6 @@ def test_scene_file_is_current():
 
 def test_gallery_notebook_runs(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    nb = json.load(open(os.path.join(ROOT, "notebooks", "materials_gallery.ipynb")))
-    ns = {}
-    for cell in nb["cells"]:
-        if cell["cell_type"] == "code":
-            src = "".join(cell["source"]).replace("RES, SPP = 320, 64", "RES, SPP = 32, 2")
-            exec(compile(src, "materials_gallery.ipynb", "exec"), ns)
+    run_notebook(os.path.join(ROOT, "notebooks", "materials_gallery.ipynb"),
+                 {"RES, SPP = 320, 64": "RES, SPP = 32, 2"})
     assert os.path.exists(tmp_path / "out" / "materials_gallery.png")

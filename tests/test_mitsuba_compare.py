@@ -4,12 +4,12 @@ Both renderers get the same scene dict and independent seeds; a biased pbr rende
 (albedo x1.02, one bounce fewer) must fail the same test."""
 
 import numpy as np
-import pytest
 import mitsuba as mi
 import trimesh
 
 import pbr
 from pbr import validate
+from mitsuba_scenes import gradient_png
 
 RES, SPP, BATCHES = 24, 1024, 16
 
@@ -47,12 +47,7 @@ def test_cornell_box_indirect_matches_mitsuba(scale):
 
 
 def test_checkerboard_and_bitmap_textures_match_mitsuba(tmp_path, scale):
-    img = np.zeros((8, 8, 3), np.float32)
-    img[..., 0] = np.linspace(0.05, 0.9, 8)[None, :]
-    img[..., 1] = np.linspace(0.9, 0.1, 8)[:, None]
-    img[..., 2] = 0.3
-    png = str(tmp_path / "tex.png")
-    pbr.write_image(png, img)
+    png = gradient_png(tmp_path)
     d = small_box(scale)
     d["floor"]["bsdf"] = {"type": "diffuse", "reflectance": {
         "type": "checkerboard", "color0": {"type": "rgb", "value": [0.8, 0.7, 0.2]},

@@ -14,7 +14,7 @@ from pbr.scene.loader import Loader
 from pbr import spectrum as spec
 from pbr import textures as tx
 from pbr.textures import load_spectrum
-from mitsuba_scenes import material_box, compare_with_mitsuba
+from mitsuba_scenes import material_box, compare_with_mitsuba, gradient_png
 from test_mitsuba_compare import small_box, check
 
 LAM = (450.0, 520.0, 600.0, 680.0)
@@ -204,14 +204,7 @@ def test_traverse_and_update():
 
 # -------------------------------------------------------------------- renders
 
-def _png(tmp_path):
-    img = np.zeros((8, 8, 3), np.float32)
-    img[..., 0] = np.linspace(0.05, 0.9, 8)[None, :]
-    img[..., 1] = np.linspace(0.9, 0.1, 8)[:, None]
-    img[..., 2] = 0.3
-    png = str(tmp_path / "tex.png")
-    pbr.write_image(png, img)
-    return png
+_png = gradient_png
 
 
 def test_mix_and_scale_match_mitsuba_blendbsdf(tmp_path, scale):
