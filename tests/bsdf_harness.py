@@ -150,3 +150,12 @@ def shared_family_results(bsdfs, wi, wo, samples=None, make=None):
             r["bs"] = loader.bsdfs.sample(sel, ctx, u1, u2, mi.Bool(True))
             r["bs_alone"] = alone.sample(wi, u1, u2)
         yield r
+
+
+def assert_scene_error(bsdf: dict, key: str, text: str) -> None:
+    """Loading ``bsdf`` raises a SceneError whose message names ``key`` and says ``text``."""
+    import pytest
+    from pbr.scene.props import SceneError
+    with pytest.raises(SceneError) as e:
+        OneBSDF(bsdf)
+    assert key in str(e.value) and text in str(e.value), str(e.value)
