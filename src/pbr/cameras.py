@@ -44,6 +44,8 @@ def _x_fov(props: Props, aspect: float) -> float:
 
 
 class PerspectiveCamera:
+    medium = 0  # index + 1 of the medium the camera sits in (0: vacuum)
+
     def __init__(self, props: Props):
         self.film = HDRFilm(Props({"type": "hdrfilm"}, props.key("film")))
         self.sampler = IndependentSampler()
@@ -53,6 +55,8 @@ class PerspectiveCamera:
                 self.film = HDRFilm(props.child(key))
             elif t in SAMPLERS:
                 self.sampler = SAMPLERS[t](props.child(key))
+            elif props.loader is not None and props.loader.is_medium(child):
+                props.mark(key)  # the camera's medium: resolved by the loader
             elif t in ("independent", "stratified", "multijitter", "orthogonal", "ldsampler"):
                 raise props.error(key, f"sampler {t!r} is not supported yet (supported: independent)")
             else:

@@ -42,3 +42,49 @@ def hg_sample(wo, g, u: mi.Point2f):
     frame = mi.Frame3f(-wo)
     wi = frame.to_world(mi.Vector3f(sin_t * cp, sin_t * sp, mu))
     return wi, hg(-mu, g)
+
+
+def rayleigh(cos_theta):
+    """Rayleigh phase function 3 (1 + cos^2) / (16 pi) (symmetric, so the direction
+    convention does not matter)."""
+    return (3.0 / (16.0 * dr.pi)) * (1.0 + cos_theta * cos_theta)
+
+
+def rayleigh_sample(wo, u: mi.Point2f):
+    """Sample ``wi`` from the Rayleigh phase function: (wi, pdf). The CDF of
+    mu = cos(theta) is (mu^3 + 3 mu + 4) / 8, inverted in closed form (Cardano):
+    mu = A - 1/A with A^3 = z + sqrt(z^2 + 1), z = 4u - 2."""
+    z = 4.0 * u.x - 2.0
+    a = dr.cbrt(z + dr.sqrt(z * z + 1.0))
+    mu = dr.clip(a - dr.rcp(a), -1.0, 1.0)
+    sin_t = dr.safe_sqrt(1.0 - mu * mu)
+    sp, cp = dr.sincos(2.0 * dr.pi * u.y)
+    wi = mi.Frame3f(-wo).to_world(mi.Vector3f(sin_t * cp, sin_t * sp, mu))
+    return wi, rayleigh(mu)
+
+
+# Phase function kinds of media (isotropic is HG with g = 0).
+HG, RAYLEIGH = 0, 1
+
+
+def phase_eval(kind, g, wo, wi, kinds):
+    """Value (= density) of the phase function ``kind`` (per lane) for the directions
+    (wo, wi); ``kinds`` is the Python set of kinds present, so a scene without Rayleigh
+    media has no Rayleigh code."""
+    c = dr.dot(wo, wi)
+    v = hg(c, g) if HG in kinds else mi.Float(0.0)
+    if RAYLEIGH in kinds:
+        v = dr.select(kind == RAYLEIGH, rayleigh(c), v) if HG in kinds else rayleigh(c)
+    return v
+
+
+def phase_sample(kind, g, wo, u: mi.Point2f, kinds):
+    """Sample a new direction: (wi, pdf); the phase weight p / pdf is exactly 1."""
+    if kinds == {RAYLEIGH}:
+        return rayleigh_sample(wo, u)
+    wi, pdf = hg_sample(wo, g, u)
+    if RAYLEIGH in kinds:
+        wr, pr = rayleigh_sample(wo, u)
+        ray = kind == RAYLEIGH
+        wi, pdf = dr.select(ray, wr, wi), dr.select(ray, pr, pdf)
+    return wi, pdf

@@ -23,6 +23,7 @@ from ..scene.props import SceneError
 from ..spectrum import luminance_rgb
 from .principled import Principled, PrincipledThin
 from .layered import CoatedConductor, CoatedDiffuse
+from .measured import Measured
 
 BSDF_TYPES: dict[str, type] = {
     "diffuse": Diffuse,
@@ -39,6 +40,7 @@ BSDF_TYPES: dict[str, type] = {
     "principledthin": PrincipledThin,
     "coateddiffuse": CoatedDiffuse,
     "coatedconductor": CoatedConductor,
+    "measured": Measured,
 }
 
 
@@ -176,12 +178,22 @@ class BSDFSet:
         self.smooth_of = mi.Bool(smooth)
         self.all_smooth = all(smooth)
         self.masked = any(o != NO_BACK for _, _, _, o in self.entries)
+        # Pure ``null`` entries: index-matched medium boundaries, skipped by volpath.
+        null = [t == "null" and i not in self.blend_of for i, (t, _, _, _) in enumerate(self.entries)]
+        self.null_of = mi.Bool(null)
+        self.has_null = any(null)
 
     def smooth(self, bsdf_id, active):
         """True where the entry has a non-delta lobe (worth sampling a light for)."""
         if self.all_smooth:
             return mi.Bool(True)
         return dr.gather(mi.Bool, self.smooth_of, bsdf_id, active)
+
+    def is_null(self, bsdf_id, active):
+        """True where the entry is a pure ``null`` BSDF (light passes unchanged)."""
+        if not self.has_null:
+            return mi.Bool(False)
+        return dr.gather(mi.Bool, self.null_of, bsdf_id, active)
 
     @property
     def dispersive(self) -> bool:

@@ -2,5 +2,7 @@
 
 from .base import SamplingIntegrator  # noqa: F401
 from .path import PathIntegrator
+from .volpath import SimpleVolPathIntegrator, VolPathIntegrator
 
-INTEGRATORS = {"path": PathIntegrator}
+INTEGRATORS = {"path": PathIntegrator, "volpath": VolPathIntegrator, "volpathmis": VolPathIntegrator,
+               "simplevolpath": SimpleVolPathIntegrator}

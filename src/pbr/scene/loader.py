@@ -27,6 +27,7 @@ class Loader:
         from ..textures import TextureSet
         from ..bsdfs import BSDFSet
         from ..lights import LightSet
+        from ..media import MediumSet
         if not isinstance(d, dict) or d.get("type") != "scene":
             raise SceneError("scene: expected a dict with 'type': 'scene'")
         self.d = d
@@ -34,6 +35,8 @@ class Loader:
         self.textures = TextureSet()
         self.bsdfs = BSDFSet()
         self.lights = LightSet()
+        self.media = MediumSet()
+        self._medium_cache: dict[int, int] = {}
         self.ids: dict[str, tuple[dict, str]] = {}
         self._bsdf_cache: dict[int, int] = {}
         self._collect_ids(d, "scene")
@@ -79,6 +82,27 @@ class Loader:
             self._bsdf_cache[id(v)] = self.bsdfs.add(self, Props(v, path, self))
         return self._bsdf_cache[id(v)]
 
+    def medium(self, v: dict, path: str) -> int:
+        """Index of the medium described (or referenced) by ``v``."""
+        from ..media import MEDIUM_LIKE
+        v, path = self._deref(v, path)
+        if v.get("type") not in MEDIUM_LIKE:
+            raise SceneError(f"{path}: expected a medium ({', '.join(sorted(MEDIUM_LIKE))}), "
+                             f"got type {v.get('type')!r}")
+        if id(v) not in self._medium_cache:
+            self._medium_cache[id(v)] = self.media.add(self, Props(v, path, self))
+        return self._medium_cache[id(v)]
+
+    def is_medium(self, v) -> bool:
+        """Whether a child dict is a medium or a reference to one."""
+        from ..media import MEDIUM_LIKE
+        if not isinstance(v, dict):
+            return False
+        if v.get("type") == "ref":
+            target = self.ids.get(v.get("id"))
+            return target is not None and target[0].get("type") in MEDIUM_LIKE
+        return v.get("type") in MEDIUM_LIKE
+
     def load(self):
         from .scene import Scene
         from ..geometry import shape_to_mitsuba, SHAPE_PARAMS
@@ -86,7 +110,7 @@ class Loader:
         from ..integrators import INTEGRATORS
 
         sensors, integrator_props, shapes = [], None, []
-        shape_bsdf, shape_light, shape_ids = [], [], []
+        shape_bsdf, shape_light, shape_ids, shape_media = [], [], [], []
         default_bsdf = default_black = None
         root = Props(self.d, "scene", self)
         for key, v in self.d.items():
@@ -98,7 +122,14 @@ class Loader:
             root.mark(key)
             t = v["type"]
             if t in SENSORS:
-                sensors.append(SENSORS[t](Props(v, path, self)))
+                sp = Props(v, path, self)
+                sensor = SENSORS[t](sp)
+                # The medium the camera sits in (Mitsuba: a medium nested in the sensor).
+                med = [(k, c) for k, c in sp.children() if self.is_medium(c)]
+                if len(med) > 1:
+                    raise sp.error(med[1][0], "a sensor takes at most one medium")
+                sensor.medium = self.medium(med[0][1], sp.key(med[0][0])) + 1 if med else 0
+                sensors.append(sensor)
             elif t in INTEGRATORS:
                 if integrator_props is not None:
                     raise SceneError(f"{path}: a scene has at most one integrator")
@@ -137,10 +168,12 @@ class Loader:
                     if light:
                         raise p.error(k, "a shape takes at most one emitter")
                     light = self.lights.add(self, Props(c, p.key(k), self), sidx) + 1
-                for k in ("interior", "exterior"):
+                media = [0, 0]
+                for j, k in enumerate(("interior", "exterior")):
                     if p.has(k):
-                        raise p.error(k, "participating media are not supported yet")
+                        media[j] = self.medium(p.raw(k), p.key(k)) + 1
                 p.finish()
+                shape_media.append(media)
                 shapes.append(geo)
                 shape_bsdf.append(b)
                 shape_light.append(light)
@@ -156,6 +189,8 @@ class Loader:
                 load_spectrum(self, v, path, emitter=False)
             elif t in EMITTER_LIKE:
                 self.lights.add(self, Props(v, path, self))
+            elif self.is_medium(v) and t != "ref":
+                self.medium(v, path)
             else:
                 raise SceneError(f"{path}: unknown plugin type {t!r}")
         if not shapes:
@@ -166,7 +201,7 @@ class Loader:
         if integrator_props is None:
             integrator_props = Props({"type": "path"}, "scene.integrator", self)
         integrator = INTEGRATORS[integrator_props.type](integrator_props)
-        return Scene(self, shapes, shape_bsdf, shape_light, shape_ids, sensors, integrator)
+        return Scene(self, shapes, shape_bsdf, shape_light, shape_ids, sensors, integrator, shape_media)
 
 
 def load_dict(d: dict, base_dir: str | None = None):

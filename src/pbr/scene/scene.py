@@ -9,7 +9,7 @@ from ..geometry import Geometry
 
 
 class Scene:
-    def __init__(self, loader, shapes, shape_bsdf, shape_light, shape_ids, sensors, integrator):
+    def __init__(self, loader, shapes, shape_bsdf, shape_light, shape_ids, sensors, integrator, shape_media=None):
         self.textures = loader.textures
         self.bsdfs = loader.bsdfs
         self.lights = loader.lights
@@ -18,6 +18,12 @@ class Scene:
         self.shape_ids = shape_ids
         self.shape_bsdf = mi.UInt32(shape_bsdf)
         self.shape_light = mi.UInt32(shape_light)     # light index + 1; 0: not emissive
+        self.media = loader.media
+        shape_media = shape_media or [[0, 0]] * len(shape_ids)
+        # Medium index + 1 inside / outside each shape (0: vacuum or no transition).
+        self.shape_interior = mi.UInt32([a for a, _ in shape_media])
+        self.shape_exterior = mi.UInt32([b for _, b in shape_media])
+        self.shape_transition = mi.Bool([a > 0 or b > 0 for a, b in shape_media])
         self.sensors = sensors
         self.integrator = integrator
         self.build()
@@ -26,6 +32,7 @@ class Scene:
         """(Re)build every parameter table from the current parameter values."""
         self.textures.build()
         self.bsdfs.build(self.textures)
+        self.media.build(self.textures)
         self.lights.build(self, self.integrator.light_sampler)
 
     @property
