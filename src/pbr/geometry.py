@@ -25,8 +25,13 @@ SHAPE_PARAMS = {
     "cylinder": ("to_world", "flip_normals", "p0", "p1", "radius"),
     "obj": ("to_world", "flip_normals", "filename", "face_normals", "flip_tex_coords"),
     "ply": ("to_world", "flip_normals", "filename", "face_normals", "flip_tex_coords"),
+    # Mitsuba's curves (round tubes; a text file of "x y z radius" lines, a blank line
+    # between curves). Their shading frame has s around the tube and t along it.
+    "bsplinecurve": ("to_world", "filename"),
+    "linearcurve": ("to_world", "filename"),
 }
 MESH_FILES = ("obj", "ply")
+CURVE_FILES = ("bsplinecurve", "linearcurve")
 
 
 def _to_mi_transform(m: np.ndarray):
@@ -45,7 +50,11 @@ def load_mesh_file(props: Props, path: str) -> "mi.Mesh":
     flip_tc = props.bool("flip_tex_coords", props.type == "obj")
     flip_normals = props.bool("flip_normals", False)
     try:
-        mesh = trimesh.load(path, process=False, force="mesh", maintain_order=True)
+        # A single mesh is used as read: merging (force="mesh") copies its colours, which
+        # trimesh cannot do for PLY face colours without scipy.
+        mesh = trimesh.load(path, process=False, maintain_order=True)
+        if not isinstance(mesh, trimesh.Trimesh):
+            mesh = trimesh.load(path, process=False, force="mesh", maintain_order=True)
     except Exception as e:
         raise props.error("filename", f"cannot read mesh {path!r}: {e}") from None
     v = np.asarray(mesh.vertices, dtype=np.float64)
@@ -82,6 +91,8 @@ def load_mesh_file(props: Props, path: str) -> "mi.Mesh":
         params.update()
         if n is None and not face_normals:
             m.recompute_vertex_normals()
+    from .meshattr import attach, file_attributes
+    attach(m, file_attributes(mesh, props.type, props.key("filename")))
     return m
 
 
@@ -105,6 +116,14 @@ def shape_to_mitsuba(props: Props, resolve_path):
             d[k] = mi.ScalarPoint3f(*props.vector3(k))
         elif k == "radius":
             d[k] = props.float(k, min=0.0)
+        elif k == "filename":
+            d[k] = resolve_path(props.string(k), props.key(k))
+    if t in CURVE_FILES:
+        # Loaded here so that a malformed curve file is reported under its key.
+        try:
+            return mi.load_dict(d)
+        except Exception as e:
+            raise props.error("filename", f"Mitsuba could not load the curves: {e}") from None
     return d
 
 

@@ -34,11 +34,13 @@ import numpy as np
 import drjit as dr
 import mitsuba as mi
 
+from . import meshattr
 from . import spectrum as spec
+from .meshattr import MeshAttribute
 from .scene.props import Props, SceneError
 
 # Slot kinds.
-CONSTANT, CHECKERBOARD, BITMAP, COMPOSITE = 0, 1, 2, 3
+CONSTANT, CHECKERBOARD, BITMAP, COMPOSITE, MESH_ATTRIBUTE = 0, 1, 2, 3, 4
 # Composite operations.
 OP_SCALE, OP_MIX, OP_CHECKER = 0, 1, 2
 # Base spectrum of a constant.
@@ -103,6 +105,10 @@ class TextureSet:
         self.checkers: list[int] = []
         self.bitmaps: list[int] = []
         self.composites: list[int] = []
+        self.mesh_attrs: list[int] = []
+        self.mesh_data: list = []       # meshes read by mesh_attrs, their slots and
+        self.mesh_uses: list = []       # triangles (set by meshattr.bind)
+        self.mesh_geometry: dict = {}
         self._cache: dict = {}
 
     # -- building -------------------------------------------------------------------
@@ -110,13 +116,19 @@ class TextureSet:
         slot = len(self.items)
         self.items.append(tex)
         kind = {ConstantSpectrum: self.constants, Checkerboard: self.checkers, Bitmap: self.bitmaps,
-                Composite: self.composites}[type(tex)]
+                Composite: self.composites, MeshAttribute: self.mesh_attrs}[type(tex)]
         kind.append(slot)
         return slot
 
+    def param_owners(self) -> list:
+        """Objects whose ``params`` are scene parameters (under ``<path>.<name>``): the
+        textures and the meshes whose attributes textures read."""
+        return self.items + self.mesh_data
+
     def kind_of(self, slot: int) -> int:
         t = type(self.items[slot])
-        return {ConstantSpectrum: CONSTANT, Checkerboard: CHECKERBOARD, Bitmap: BITMAP, Composite: COMPOSITE}[t]
+        return {ConstantSpectrum: CONSTANT, Checkerboard: CHECKERBOARD, Bitmap: BITMAP, Composite: COMPOSITE,
+                MeshAttribute: MESH_ATTRIBUTE}[t]
 
     def depth_of(self, slot: int) -> int:
         """Nesting depth of combinators below ``slot`` (0 for the plain kinds)."""
@@ -147,6 +159,8 @@ class TextureSet:
                 m = self.constant_value(t.m)
                 return (1.0 - m) * x + m * self.constant_value(t.y)
             return 0.5 * (x + self.constant_value(t.y))
+        if isinstance(t, MeshAttribute):   # data unknown at load time: a mid-range guess
+            return 0.5 * float(t.params["scale"][0])
         return float(np.mean(spec.luminance_rgb(np.moveaxis(np.array(t.params["data"]), -1, 0)[:3])))
 
     def build(self) -> None:
@@ -154,7 +168,7 @@ class TextureSet:
         n = len(self.items)
         kinds = [self.kind_of(s) for s in range(n)]
         index = [0] * n
-        for lst in (self.constants, self.checkers, self.bitmaps, self.composites):
+        for lst in (self.constants, self.checkers, self.bitmaps, self.composites, self.mesh_attrs):
             for i, s in enumerate(lst):
                 index[s] = i
         T = {"slot_kind": mi.UInt32(kinds), "slot_index": mi.UInt32(index)}
@@ -254,6 +268,7 @@ class TextureSet:
                                           default=0)
                 self._levels[d] = ({c.op for c in cs}, role("x", (OP_SCALE, OP_MIX, OP_CHECKER)),
                                    role("y", (OP_MIX, OP_CHECKER)), role("m", (OP_SCALE, OP_MIX)))
+        meshattr.build_tables(self, index, T)
         dr.eval(T)
         self.T = T
         self.bases = {c.base for c in consts}
@@ -359,34 +374,37 @@ class TextureSet:
         return v, A[0] * gs + A[3] * gt, A[1] * gs + A[4] * gt
 
     def eval(self, slot, uv, lam: mi.Spectrum, active=True, illuminant=True) -> mi.Spectrum:
-        """Spectrum of texture ``slot`` at surface coordinates ``uv``. Callers that can only
-        reach non-illuminant textures (reflectances) pass ``illuminant=False`` to keep
-        the D65 lookup out of their kernels."""
+        """Spectrum of texture ``slot`` at ``uv``: surface coordinates, or the surface
+        interaction (BSDFs pass ``ctx.si``: ``mesh_attribute`` textures need the hit; they
+        are 0 at plain coordinates). Callers that can only reach non-illuminant textures
+        (reflectances) pass ``illuminant=False`` to keep the D65 lookup out of their kernels."""
         slot = mi.UInt32(slot)
+        si = uv if isinstance(uv, mi.SurfaceInteraction3f) else None
+        uv = si.uv if si is not None else uv
         if not self.composites:
-            return self._eval_leaf(slot, uv, lam, active, illuminant)
-        return self._eval_node(slot, uv, lam, mi.Bool(active), illuminant, self.depth)
+            return self._eval_leaf(slot, uv, lam, active, illuminant, si)
+        return self._eval_node(slot, uv, lam, mi.Bool(active), illuminant, self.depth, si)
 
-    def _eval_node(self, slot, uv, lam, active, illuminant, depth):
+    def _eval_node(self, slot, uv, lam, active, illuminant, depth, si=None):
         """Evaluate ``slot`` whose combinator nesting is at most ``depth`` levels: at each
         level a composite lane evaluates its children one level down, any other lane
         passes its own (leaf) slot down as the first child."""
         if depth == 0:
-            return self._eval_leaf(slot, uv, lam, active, illuminant)
+            return self._eval_leaf(slot, uv, lam, active, illuminant, si)
         T = self.T
         ops, dx, dy, dm = self._levels[depth]
         comp = active & (dr.gather(mi.UInt32, T["slot_kind"], slot, active) == COMPOSITE)
         ni = dr.gather(mi.UInt32, T["slot_index"], slot, comp)
         op = dr.gather(mi.UInt32, T["n_op"], ni, comp) if len(ops) > 1 else mi.UInt32(next(iter(ops)))
         x_slot = dr.select(comp, dr.gather(mi.UInt32, T["n_x"], ni, comp), slot)
-        x = self._eval_node(x_slot, uv, lam, active, illuminant, dx)
+        x = self._eval_node(x_slot, uv, lam, active, illuminant, dx, si)
         result = x
         if ops & {OP_SCALE, OP_MIX}:
             uses_m = comp & (op != OP_CHECKER)
-            m = self._eval_node(dr.gather(mi.UInt32, T["n_m"], ni, uses_m), uv, lam, uses_m, illuminant, dm)
+            m = self._eval_node(dr.gather(mi.UInt32, T["n_m"], ni, uses_m), uv, lam, uses_m, illuminant, dm, si)
         if ops & {OP_MIX, OP_CHECKER}:
             uses_y = comp & (op != OP_SCALE)
-            y = self._eval_node(dr.gather(mi.UInt32, T["n_y"], ni, uses_y), uv, lam, uses_y, illuminant, dy)
+            y = self._eval_node(dr.gather(mi.UInt32, T["n_y"], ni, uses_y), uv, lam, uses_y, illuminant, dy, si)
         if OP_SCALE in ops:
             result = dr.select(comp & (op == OP_SCALE), x * m, result)
         if OP_MIX in ops:
@@ -399,15 +417,15 @@ class TextureSet:
             result = dr.select(is_ck & second, y, result)
         return result
 
-    def _eval_leaf(self, slot, uv, lam, active, illuminant):
-        """A constant, checkerboard (of constants) or bitmap slot."""
+    def _eval_leaf(self, slot, uv, lam, active, illuminant, si=None):
+        """A constant, checkerboard (of constants), bitmap or mesh-attribute slot."""
         T = self.T
-        if len(self.items) == 1 or not (self.checkers or self.bitmaps):
+        if len(self.items) == 1 or not (self.checkers or self.bitmaps or self.mesh_attrs):
             kind = mi.UInt32(self.kind_of(0)) if len(self.items) == 1 else mi.UInt32(CONSTANT)
         else:
             kind = dr.gather(mi.UInt32, T["slot_kind"], slot, active)
         # With constants only, slots are constant-table indices already.
-        only_constants = not (self.checkers or self.bitmaps or self.composites)
+        only_constants = not (self.checkers or self.bitmaps or self.composites or self.mesh_attrs)
         idx = slot if only_constants else dr.gather(mi.UInt32, T["slot_index"], slot, active)
         result = mi.Spectrum(0.0)
         if self.constants:
@@ -420,10 +438,16 @@ class TextureSet:
                 c0 = dr.gather(mi.UInt32, T["k_color0"], idx, is_ck)
                 c1 = dr.gather(mi.UInt32, T["k_color1"], idx, is_ck)
                 ci = dr.select(is_ck, dr.select(same, c0, c1), idx)
-            result = self._eval_constant(ci, lam, active & (kind != BITMAP), illuminant)
+            on = active & (kind != BITMAP)
+            if self.mesh_attrs:
+                on &= kind != MESH_ATTRIBUTE
+            result = self._eval_constant(ci, lam, on, illuminant)
         if self.bitmaps:
             is_bm = active & (kind == BITMAP)
             result = dr.select(is_bm, self._eval_bitmap(idx, uv, lam, is_bm, illuminant), result)
+        if self.mesh_data and si is not None:   # elsewhere mesh attributes are 0
+            is_ma = active & (kind == MESH_ATTRIBUTE)
+            result = dr.select(is_ma, meshattr.evaluate(self, idx, si, lam, is_ma), result)
         return result
 
 
@@ -598,5 +622,7 @@ def _load(loader, value, path: str, emitter: bool, unbounded: bool = False) -> i
         slot = texs.add(Bitmap(rgb, filter_type, wrap_mode, to_uv, form_rgb))
         texs.items[slot].raw_values = raw_values
         return slot
+    if t == "mesh_attribute":
+        return meshattr.load(texs, p, form_rgb)
     raise SceneError(f"{path}: unsupported texture/spectrum type {t!r} (supported: rgb, spectrum, blackbody, "
-                     "d65, uniform, checkerboard, bitmap, scale, mix, ref)")
+                     "d65, uniform, checkerboard, bitmap, scale, mix, mesh_attribute, ref)")

@@ -227,7 +227,7 @@ class BSDFSet:
             return None
         slot = dr.gather(mi.UInt32, self.opacity_of, bsdf_id, active)
         has = active & (slot != NO_BACK)
-        o = self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, has, illuminant=False)[0]
+        o = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, has, illuminant=False)[0]
         return dr.select(has, dr.clip(o, 0.0, 1.0), 1.0)
 
     def _perturb(self, bsdf_id, ctx, active):
@@ -323,7 +323,7 @@ class BSDFSet:
         """(component a, component b, weight of b, is-blend mask) per lane."""
         slot = dr.gather(mi.UInt32, self.blend_w, bsdf_id, active)
         is_blend = active & (slot != NO_BACK)
-        w = self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, is_blend, illuminant=False)[0]
+        w = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, is_blend, illuminant=False)[0]
         a = dr.select(is_blend, dr.gather(mi.UInt32, self.blend_a, bsdf_id, is_blend), bsdf_id)
         b = dr.gather(mi.UInt32, self.blend_b, bsdf_id, is_blend)
         return a, b, dr.select(is_blend, dr.clip(w, 0.0, 1.0), 0.0), is_blend

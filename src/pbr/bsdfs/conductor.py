@@ -66,7 +66,7 @@ class Conductor(BSDFType):
         self.eta, self.k, self.spec = (mi.UInt32([i[j] for i in self.instances]) for j in range(3))
 
     def _reflectance(self, ctx, idx, cos_i, active):
-        tex, uv, lam = self.textures, ctx.si.uv, ctx.wl.lambda_
+        tex, uv, lam = self.textures, ctx.si, ctx.wl.lambda_
         ev = lambda t: tex.eval(dr.gather(mi.UInt32, t, idx, active), uv, lam, active, illuminant=False)  # noqa: E731
         return fresnel_conductor(cos_i, ev(self.eta), ev(self.k)) * ev(self.spec)
 
@@ -105,7 +105,7 @@ class RoughConductor(Conductor):
         self.variant_table = VariantTable([i[5] for i in self.instances])
 
     def _roughness(self, ctx, idx, active):
-        tex, uv, lam = self.textures, ctx.si.uv, ctx.wl.lambda_
+        tex, uv, lam = self.textures, ctx.si, ctx.wl.lambda_
         a = lambda t: tex.eval(dr.gather(mi.UInt32, t, idx, active), uv, lam, active, illuminant=False)[0]  # noqa: E731
         return a(self.au), a(self.av), self.variant_table.lane(idx, active)
 

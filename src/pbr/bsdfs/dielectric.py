@@ -191,8 +191,8 @@ class _Dielectric(BSDFType):
         disp = active & (si != _NO_TEXTURE)
         se = dr.gather(mi.UInt32, self.ext_slot, idx, disp)
         lam = ctx.wl.lambda_
-        ni = self.textures.eval(si, ctx.si.uv, lam, disp, illuminant=False)[0]
-        ne = self.textures.eval(se, ctx.si.uv, lam, disp, illuminant=False)[0]
+        ni = self.textures.eval(si, ctx.si, lam, disp, illuminant=False)[0]
+        ne = self.textures.eval(se, ctx.si, lam, disp, illuminant=False)[0]
         return dr.select(disp, ni / dr.maximum(ne, 1e-6), eta)
 
     def _terminates(self, idx, active):
@@ -208,9 +208,9 @@ class _Dielectric(BSDFType):
         table, some_missing = self.tex[name]
         slot = dr.gather(mi.UInt32, table, idx, active)
         if not some_missing:
-            return self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, active, illuminant=False)
+            return self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active, illuminant=False)
         has = slot != _NO_TEXTURE
-        v = self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, active & has, illuminant=False)
+        v = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active & has, illuminant=False)
         return dr.select(has, v, 1.0)
 
     def _lobe_weight(self, ctx, idx, sel_r, w_r, w_t, active):
@@ -319,7 +319,7 @@ class RoughDielectric(_Dielectric):
     def _params(self, ctx, idx, active):
         """(eta, alpha_u, alpha_v, variant index or None) at this hit."""
         eta = self._eta_of(ctx, idx, active)
-        uv, lam = ctx.si.uv, ctx.wl.lambda_
+        uv, lam = ctx.si, ctx.wl.lambda_
         au = self.textures.eval(dr.gather(mi.UInt32, self.alpha_u, idx, active), uv, lam, active, illuminant=False)[0]
         av = (self.textures.eval(dr.gather(mi.UInt32, self.alpha_v, idx, active), uv, lam, active, illuminant=False)[0]
               if self.anisotropic else au)

@@ -26,7 +26,7 @@ class Diffuse(BSDFType):
 
     def _albedo(self, ctx, idx, active):
         slot = dr.gather(mi.UInt32, self.reflectance, idx, active)
-        return self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, active, illuminant=False)
+        return self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active, illuminant=False)
 
     @staticmethod
     def _eval(albedo, wi, wo):

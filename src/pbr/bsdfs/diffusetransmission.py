@@ -48,7 +48,7 @@ class DiffuseTransmission(BSDFType):
         out = []
         for table in (self.reflectance, self.transmittance):
             slot = dr.gather(mi.UInt32, table, idx, active)
-            v = self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, active, illuminant=False)
+            v = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active, illuminant=False)
             if self.any_scale:
                 v = v * dr.gather(mi.Float, self.scale, idx, active)
             out.append(dr.clip(v, 0.0, 1.0))

@@ -323,7 +323,7 @@ class _Layered(BSDFType):
 
     # -- per-hit parameters ---------------------------------------------------------
     def _tex(self, ctx, idx, active):
-        tex, uv, lam = self.textures, ctx.si.uv, ctx.wl.lambda_
+        tex, uv, lam = self.textures, ctx.si, ctx.wl.lambda_
         return lambda table: tex.eval(dr.gather(mi.UInt32, table, idx, active), uv, lam, active,  # noqa: E731
                                       illuminant=False)
 
@@ -339,7 +339,7 @@ class _Layered(BSDFType):
         if self.dispersive:
             slot = dr.gather(mi.UInt32, self.eta_slot, idx, active)
             disp = active & (slot != _NONE)
-            e = self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, disp, illuminant=False)[0]
+            e = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, disp, illuminant=False)[0]
             eta = dr.select(disp, dr.select(e == 0, 1.0, e), eta)
             terminate = disp
         top = _Top(eta, *self._alpha(ev, idx, self.top_u, self.top_v, active), self.top_kind)

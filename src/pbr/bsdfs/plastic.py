@@ -49,7 +49,7 @@ class Plastic(BSDFType):
 
     def _tex(self, table, ctx, idx, active):
         slot = dr.gather(mi.UInt32, table, idx, active)
-        return self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, active, illuminant=False)
+        return self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active, illuminant=False)
 
     def _diffuse_term(self, ctx, idx, eta, fdr_int, f_i, f_o, active):
         """f_d * pi / cos: the diffuse albedo after coating losses and re-reflections."""

@@ -214,7 +214,7 @@ class _PrincipledFamily(BSDFType):
         table, some_off = entry if isinstance(entry, tuple) else (entry, False)
         slot = dr.gather(mi.UInt32, table, idx, active)
         on = active & (slot != _NONE) if some_off else active
-        v = self.textures.eval(slot, ctx.si.uv, ctx.wl.lambda_, on, illuminant=False)
+        v = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, on, illuminant=False)
         if not spectral:
             v = v[0]
         return dr.select(slot != _NONE, v, 0.0) if some_off else v

@@ -19,7 +19,7 @@ BSDF_LIKE = {"diffuse", "conductor", "roughconductor", "dielectric", "thindielec
              "measured", "hair", "mix"}
 EMITTER_LIKE = {"area", "point", "spot", "projector", "directional", "constant", "envmap", "directionalarea",
                 "projection", "goniometric", "distant", "portalenvmap"}
-TEXTURE_LIKE = {"rgb", "spectrum", "blackbody", "d65", "uniform", "checkerboard", "bitmap", "scale"}
+TEXTURE_LIKE = {"rgb", "spectrum", "blackbody", "d65", "uniform", "checkerboard", "bitmap", "scale", "mesh_attribute"}
 
 
 class Loader:
@@ -39,6 +39,8 @@ class Loader:
         self._medium_cache: dict[int, int] = {}
         self.ids: dict[str, tuple[dict, str]] = {}
         self._bsdf_cache: dict[int, int] = {}
+        self.bsdf_textures: dict[int, set] = {}   # BSDF entry -> texture slots it reads
+        self._reading: list[set] = []
         self._collect_ids(d, "scene")
 
     # -- ids, refs, files ----------------------------------------------------------------
@@ -79,8 +81,18 @@ class Loader:
     def bsdf(self, v: dict, path: str) -> int:
         v, path = self._deref(v, path)
         if id(v) not in self._bsdf_cache:
-            self._bsdf_cache[id(v)] = self.bsdfs.add(self, Props(v, path, self))
-        return self._bsdf_cache[id(v)]
+            first = len(self.textures.items)
+            self._reading.append(set())   # slots of nested BSDFs parsed earlier
+            try:
+                b = self.bsdfs.add(self, Props(v, path, self))
+            finally:
+                nested = self._reading.pop()
+            self._bsdf_cache[id(v)] = b
+            self.bsdf_textures[b] = set(range(first, len(self.textures.items))) | nested
+        b = self._bsdf_cache[id(v)]
+        if self._reading:
+            self._reading[-1] |= self.bsdf_textures[b]
+        return b
 
     def medium(self, v: dict, path: str) -> int:
         """Index of the medium described (or referenced) by ``v``."""

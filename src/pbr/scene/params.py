@@ -15,7 +15,7 @@ class SceneParameters:
     def __init__(self, scene):
         self.scene = scene
         self._owners = {}
-        for tex in scene.textures.items:
+        for tex in scene.textures.param_owners():
             for name in tex.params:
                 self._owners[f"{tex.path}.{name}"] = (tex, name)
         self._dirty = set()

@@ -5,6 +5,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from .. import meshattr
 from ..geometry import Geometry
 
 
@@ -16,6 +17,7 @@ class Scene:
         self.geometry = Geometry(shapes)
         self.mi_scene = self.geometry.mi_scene
         self.shape_ids = shape_ids
+        meshattr.bind(self.textures, shapes, shape_bsdf, shape_ids, getattr(loader, "bsdf_textures", {}))
         self.shape_bsdf = mi.UInt32(shape_bsdf)
         self.shape_light = mi.UInt32(shape_light)     # light index + 1; 0: not emissive
         self.media = loader.media
@@ -41,7 +43,7 @@ class Scene:
         return self.sensors[0].sampler.sample_count
 
     def requires_grad(self) -> bool:
-        return any(dr.grad_enabled(v) for t in self.textures.items for v in t.params.values())
+        return any(dr.grad_enabled(v) for t in self.textures.param_owners() for v in t.params.values())
 
     def __repr__(self):
         w, h = self.sensors[0].film.size

@@ -573,7 +573,7 @@ def to_xml(d: dict) -> str:
             return "integrator"
         if t in ("blackbody", "d65", "uniform"):
             return "spectrum"
-        if t in ("bitmap", "checkerboard", "scale", "mix"):
+        if t in ("bitmap", "checkerboard", "scale", "mix", "mesh_attribute"):
             return "texture"
         return "shape"
 
