@@ -147,10 +147,33 @@ class Geometry:
         self.to_pbr_shape = mi.UInt32(perm)
         self._identity = perm == list(range(len(perm)))
         del order
+        self._curve_ends(self.mi_scene.shapes())
+
+    def _curve_ends(self, mi_shapes):
+        """Work around a Mitsuba 3.9 ``bsplinecurve`` bug: its shading partials look up
+        segment floor(v * N) from the global curve parameter v = (v_local + i) / N, which
+        rounds to 1 near the end of the last segment (i = N - 1), and then read past the
+        segment table (measured: rare segfaults). Hits on that segment keep v_local below
+        1 - N 2^-21, which keeps floor(v N) <= N - 1 in float32 (a shift < 1e-4 of the
+        last segment for N < 200 segments)."""
+        last, vmax = [], []
+        for s in mi_shapes:
+            curve = s.shape_type() == int(mi.ShapeType.BSplineCurve)
+            n = s.primitive_count() if curve else 0
+            last.append(n - 1 if curve else 0xFFFFFFFF)
+            vmax.append(max(1.0 - n * 2.0 ** -21, 0.0) if curve else 1.0)
+        self._curves = any(v < 1.0 for v in vmax)
+        if self._curves:
+            self.curve_last_segment = mi.UInt32(last)
+            self.curve_v_max = mi.Float(vmax)
 
     def intersect(self, ray: mi.Ray3f, active):
         """(surface interaction, pbr shape index) of the closest hit."""
         pi = self.mi_scene.ray_intersect_preliminary(ray, False, active)
+        if self._curves:
+            end = active & (pi.prim_index == dr.gather(mi.UInt32, self.curve_last_segment, pi.shape_index, active))
+            v = dr.minimum(pi.prim_uv.x, dr.gather(mi.Float, self.curve_v_max, pi.shape_index, end))
+            pi.prim_uv = mi.Point2f(dr.select(end, v, pi.prim_uv.x), pi.prim_uv.y)
         # RayFlags.All is Mitsuba's default (uv, dp/du, shading frame; no normal partials):
         # the shading frame's tangent follows dp/du, which anisotropic BSDFs rely on.
         si = pi.compute_surface_interaction(ray, mi.RayFlags.All, active)

@@ -23,6 +23,7 @@ from ..scene.props import SceneError
 from ..spectrum import luminance_rgb
 from .principled import Principled, PrincipledThin
 from .layered import CoatedConductor, CoatedDiffuse
+from .hair import Hair
 from .measured import Measured
 
 BSDF_TYPES: dict[str, type] = {
@@ -40,6 +41,7 @@ BSDF_TYPES: dict[str, type] = {
     "principledthin": PrincipledThin,
     "coateddiffuse": CoatedDiffuse,
     "coatedconductor": CoatedConductor,
+    "hair": Hair,
     "measured": Measured,
 }
 

@@ -45,7 +45,17 @@ def _max(s):
     return dr.maximum(dr.maximum(s[0], s[1]), dr.maximum(s[2], s[3]))
 
 
-class VolPathIntegrator(SamplingIntegrator):
+class _MediumAware(SamplingIntegrator):
+    """Integrators whose camera rays start in the sensor's medium."""
+
+    _medium = 0
+
+    def _plan(self, scene, sensor, spp):
+        self._medium = scene.sensors[sensor].medium
+        return super()._plan(scene, sensor, spp)
+
+
+class VolPathIntegrator(_MediumAware):
     name = "volpath"
 
     def __init__(self, props):
@@ -56,11 +66,6 @@ class VolPathIntegrator(SamplingIntegrator):
         self.max_null = props.int("max_null_collisions", 1 << 16, min=1)
         props.finish()
         self.capped = 0
-        self._medium = 0
-
-    def _plan(self, scene, sensor, spp):
-        self._medium = scene.sensors[sensor].medium
-        return super()._plan(scene, sensor, spp)
 
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
         self._capped = mi.UInt32(0)
@@ -347,7 +352,7 @@ class VolPathIntegrator(SamplingIntegrator):
         return L, valid
 
 
-class SimpleVolPathIntegrator(SamplingIntegrator):
+class SimpleVolPathIntegrator(_MediumAware):
     """``simplevolpath`` (pbrt-v4's SimpleVolPathIntegrator): a reference estimator with
     no light sampling and no spectral MIS. Only the first wavelength is traced (the
     others are terminated, as pbrt-v4 does); free flights use delta tracking, emission
@@ -359,9 +364,6 @@ class SimpleVolPathIntegrator(SamplingIntegrator):
         self.max_depth = props.int("max_depth", 5, min=-1)
         props.finish()
         self.light_sampler = "uniform"
-        self._medium = 0
-
-    _plan = VolPathIntegrator._plan
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
         if mode != PRIMAL:
