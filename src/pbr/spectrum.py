@@ -161,6 +161,12 @@ class SampledWavelengths(metaclass=backend.VariantStruct):
         return SampledWavelengths(self.lambda_, dr.select(self.secondary_terminated(), self.pdf, pdf))
 
 
+def first_only(s) -> mi.Spectrum:
+    """``(N s[0], 0, .., 0)``: the first wavelength's value standing for all ``N``; pbrt-v4's
+    TerminateSecondary applied to a radiance or throughput instead of the densities."""
+    return mi.Spectrum(s[0] * N_WAVELENGTHS, 0.0, 0.0, 0.0)
+
+
 def to_xyz(L: mi.Spectrum, wl: SampledWavelengths) -> mi.Array3f:
     """Monte Carlo estimate of the XYZ tristimulus values of the spectrum ``L``."""
     x, y, z = cie_xyz(wl.lambda_)

@@ -20,7 +20,7 @@ import mitsuba as mi
 from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
-from ..spectrum import N_WAVELENGTHS
+from ..spectrum import first_only
 from .base import SamplingIntegrator, PRIMAL, BACKWARD
 
 
@@ -115,8 +115,8 @@ class PathIntegrator(SamplingIntegrator):
                     # standing for all four (pbrt-v4's TerminateSecondary, applied to the
                     # radiance and throughput instead of the wavelength densities).
                     term = hit & bs.terminate & ~terminated
-                    L[term] = mi.Spectrum(L[0] * N_WAVELENGTHS, 0.0, 0.0, 0.0)
-                    beta[term] = mi.Spectrum(beta[0] * N_WAVELENGTHS, 0.0, 0.0, 0.0)
+                    L[term] = first_only(L)
+                    beta[term] = first_only(beta)
                     terminated |= term
             else:
                 L = L - Le - Ld

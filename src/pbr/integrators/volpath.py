@@ -31,18 +31,17 @@ import mitsuba as mi
 from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..media import majorant
-from ..spectrum import N_WAVELENGTHS
+from ..spectrum import first_only
 from .base import SamplingIntegrator, PRIMAL
 
 SHADOW_EPSILON = 1e-4
 
 
-def _avg(s):
-    return (s[0] + s[1] + s[2] + s[3]) * (1.0 / N_WAVELENGTHS)
-
-
-def _max(s):
-    return dr.maximum(dr.maximum(s[0], s[1]), dr.maximum(s[2], s[3]))
+def _hero_ratio(T_maj):
+    """T_maj / T_maj[0]: the weight of a segment passed without a collision, sampled
+    with the hero wavelength's probability T_maj[0] (0 where that is 0)."""
+    t0 = T_maj[0]
+    return dr.select(t0 > 0, T_maj * dr.rcp(t0), 0.0)
 
 
 class _MediumAware(SamplingIntegrator):
@@ -99,8 +98,13 @@ class VolPathIntegrator(_MediumAware):
         outside = dr.gather(mi.UInt32, scene.shape_exterior, shape, trans)
         return dr.select(trans, dr.select(dr.dot(d, si.n) > 0, outside, inside), medium)
 
-    def _count_capped(self, capped):
+    def _count_null(self, n_null, null):
+        """Count the null collisions ``null`` of each path; (new count, lanes that reach
+        ``max_null``), the latter also added to the :attr:`capped` tally."""
+        n_null = dr.select(null, n_null + 1, n_null)
+        capped = null & (n_null >= self.max_null)
         dr.scatter_reduce(dr.ReduceOp.Add, self._capped, mi.UInt32(1), mi.UInt32(0), capped)
+        return n_null, capped
 
     @dr.syntax
     def _transmittance(self, scene, rng, ray, p_light, medium, wl, active):
@@ -138,18 +142,15 @@ class VolPathIntegrator(_MediumAware):
                     r_u[coll] = r_u * T_acc * sigma_n * inv
                     T_acc[coll] = mi.Spectrum(1.0)
                     # Russian roulette on small transmittance (pbrt-v4).
-                    tr = T_ray * dr.rcp(_avg(r_l + r_u))
-                    small = coll & (_max(tr) < 0.05)
+                    tr = T_ray * dr.rcp(dr.mean(r_l + r_u))
+                    small = coll & (dr.max(tr) < 0.05)
                     kill = small & (rng.next_float32() < 0.75)
                     T_ray[kill] = mi.Spectrum(0.0)
                     T_ray[small & ~kill] = T_ray * 4.0
-                    n_null[coll] = n_null + 1
-                    capped = coll & (n_null >= self.max_null)
-                    self._count_capped(capped)
+                    n_null, capped = self._count_null(n_null, coll)
                     T_ray[capped] = mi.Spectrum(0.0)
-                    inner &= ~done & (_max(T_ray) > 0)
-                t0 = T_acc[0]
-                f = dr.select(t0 > 0, T_acc * dr.rcp(t0), 0.0)
+                    inner &= ~done & (dr.max(T_ray) > 0)
+                f = _hero_ratio(T_acc)
                 T_ray[in_m] = T_ray * f
                 r_l[in_m] = r_l * f
                 r_u[in_m] = r_u * f
@@ -162,7 +163,7 @@ class VolPathIntegrator(_MediumAware):
             nxt = si.spawn_ray(dr.normalize(p_light - si.p))
             nxt.d = dr.normalize(p_light - nxt.o)
             ray = dr.select(passable, nxt, ray)
-            going &= passable & (_max(T_ray) > 0)
+            going &= passable & (dr.max(T_ray) > 0)
         return T_ray, r_u, r_l
 
     # -- the estimator --------------------------------------------------------------------
@@ -214,7 +215,7 @@ class VolPathIntegrator(_MediumAware):
                         pdf_e = s0 * T_acc[0]
                         em = coll & (depth < max_depth) & (pdf_e > 0)
                         r_e = r_u * sigma_maj * T_acc * dr.rcp(pdf_e)
-                        L[em] = L + beta * T_acc * dr.rcp(pdf_e) * mp.sigma_a * mp.Le * dr.rcp(_avg(r_e))
+                        L[em] = L + beta * T_acc * dr.rcp(pdf_e) * mp.sigma_a * mp.Le * dr.rcp(dr.mean(r_e))
                     u_ev = rng.next_float32()
                     p_abs = mp.sigma_a[0] * dr.rcp(s0)
                     p_sca = mp.sigma_s[0] * dr.rcp(s0)
@@ -235,19 +236,16 @@ class VolPathIntegrator(_MediumAware):
                     r_u[is_null] = r_u * T_acc * sigma_n * inv_n
                     r_l[is_null] = r_l * T_acc * sigma_maj * inv_n
                     T_acc[coll] = mi.Spectrum(1.0)
-                    n_null[is_null] = n_null + 1
-                    capped = is_null & (n_null >= self.max_null)
-                    self._count_capped(capped)
+                    n_null, capped = self._count_null(n_null, is_null)
                     absorbed |= is_abs | capped
                     scattered |= is_sca
-                    going &= ~done & ~is_abs & ~is_sca & ~capped & (_max(beta) > 0) & (_max(r_u) > 0)
+                    going &= ~done & ~is_abs & ~is_sca & ~capped & (dr.max(beta) > 0) & (dr.max(r_u) > 0)
                 through = in_m & ~scattered & ~absorbed
-                t0 = T_acc[0]
-                f = dr.select(t0 > 0, T_acc * dr.rcp(t0), 0.0)
+                f = _hero_ratio(T_acc)
                 beta[through] = beta * f
                 r_u[through] = r_u * f
                 r_l[through] = r_l * f
-                absorbed |= in_m & ((_max(beta) <= 0) | (_max(r_u) <= 0))
+                absorbed |= in_m & ((dr.max(beta) <= 0) | (dr.max(r_u) <= 0))
                 n_null[active] = 0
 
             # -- surface reached (or the ray escaped) --------------------------------------
@@ -258,14 +256,14 @@ class VolPathIntegrator(_MediumAware):
             on_light &= ~skip
             Le = lights.L(light - 1, si, wl, on_light)
             pdf_light = lights.pdf_Li(light - 1, prev_p, prev_n, si, on_light & ~prev_delta)
-            denom = dr.select(prev_delta, _avg(r_u), _avg(r_u + r_l * pdf_light))
+            denom = dr.select(prev_delta, dr.mean(r_u), dr.mean(r_u + r_l * pdf_light))
             L[on_light] = L + beta * Le * dr.rcp(denom)
             if lights.has_infinite:
                 escaped = active & ~scattered & ~absorbed & ~hit
                 if self.hide_emitters:
                     escaped &= depth > 0
                 for Le_inf, pdf_inf in lights.Le_escaped(ray.d, wl, prev_p, prev_n, escaped):
-                    d_inf = dr.select(prev_delta, _avg(r_u), _avg(r_u + r_l * pdf_inf))
+                    d_inf = dr.select(prev_delta, dr.mean(r_u), dr.mean(r_u + r_l * pdf_inf))
                     L[escaped] = L + beta * Le_inf * dr.rcp(d_inf)
 
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, surf)
@@ -307,7 +305,7 @@ class VolPathIntegrator(_MediumAware):
             T_ray, tr_u, tr_l = self._transmittance(scene, rng, sray, ls.p, s_med, wl, nee)
             rl_nee = r_u * ls.pdf * tr_l
             ru_nee = r_u * pdf_em * tr_u
-            d_nee = dr.select(ls.delta, _avg(rl_nee), _avg(rl_nee + ru_nee))
+            d_nee = dr.select(ls.delta, dr.mean(rl_nee), dr.mean(rl_nee + ru_nee))
             L[nee] = L + beta * f_em * T_ray * ls.L * dr.rcp(d_nee)
 
             # -- continue: sample the BSDF or the phase function -------------------------
@@ -324,8 +322,8 @@ class VolPathIntegrator(_MediumAware):
             cont = go_on & (pdf_next > 0)
             if bsdfs.dispersive:
                 term = rs & bs.terminate & ~terminated
-                L[term] = mi.Spectrum(L[0] * N_WAVELENGTHS, 0.0, 0.0, 0.0)
-                beta[term] = mi.Spectrum(beta[0] * N_WAVELENGTHS, 0.0, 0.0, 0.0)
+                L[term] = first_only(L)
+                beta[term] = first_only(beta)
                 terminated |= term
             beta[cont] = beta * w_next
             r_l[cont] = r_u * dr.rcp(pdf_next)
@@ -342,12 +340,12 @@ class VolPathIntegrator(_MediumAware):
             depth[at_vertex] = depth + 1
 
             # Russian roulette on the MIS-weighted throughput (detached probability).
-            rr_w = _max(beta * dr.rcp(_avg(r_u))) * eta * eta
+            rr_w = dr.max(beta * dr.rcp(dr.mean(r_u))) * eta * eta
             q = dr.minimum(rr_w, 0.95)
             rr = cont & (depth >= self.rr_depth)
             survive = rng.next_float32() < q
             beta[rr] = beta * dr.rcp(q)
-            active = skip | (cont & (~rr | survive) & (_max(beta) > 0))
+            active = skip | (cont & (~rr | survive) & (dr.max(beta) > 0))
 
         return L, valid
 
@@ -444,4 +442,4 @@ class SimpleVolPathIntegrator(_MediumAware):
             depth[real | scattered] = depth + 1
             active = skip | (cont & (beta > 0))
         # Only the first wavelength was traced: it stands for all four.
-        return mi.Spectrum(L * N_WAVELENGTHS, 0.0, 0.0, 0.0), valid
+        return first_only(mi.Spectrum(L)), valid

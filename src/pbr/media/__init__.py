@@ -143,8 +143,7 @@ class MediumSet:
             raise p.error(None, "a gridvolume needs 'filename' or 'data'")
         if not np.all(np.isfinite(data)) or np.any(data < 0):
             raise p.error("filename" if p.has("filename") else "data", "grid values must be finite and >= 0")
-        ft = p.string("filter_type", "trilinear", choices=("trilinear",))
-        del ft
+        p.string("filter_type", "trilinear", choices=("trilinear",))
         p.string("wrap_mode", "clamp", choices=("clamp",))
         to_world = p.transform("to_world")
         if p.bool("use_grid_bbox", False):
