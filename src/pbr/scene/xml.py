@@ -569,7 +569,8 @@ def to_xml(d: dict) -> str:
             return "sampler"
         if t in ("box", "tent", "gaussian"):
             return "rfilter"
-        if t in ("path", "volpath", "prb", "direct"):
+        from ..integrators import INTEGRATORS
+        if t in INTEGRATORS:
             return "integrator"
         if t in ("blackbody", "d65", "uniform"):
             return "spectrum"
