@@ -9,6 +9,8 @@ import numpy as np
 def cornell_box(resolution: int = 256, spp: int = 64) -> dict:
     """The Cornell box of ``mi.cornell_box()`` (same geometry, materials, light and
     camera), as a Mitsuba-style scene dict."""
+    from . import backend
+    backend.ensure()  # the dict holds Mitsuba transforms, which need a variant
     T = mi.ScalarTransform4f
 
     def rect(tf, bsdf):

@@ -24,6 +24,7 @@ import numpy as np
 
 from ..spectrum import LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, sellmeier_ior
 from ..textures import add_tabulated, load_spectrum
+from ..scene.params import ParamOwner, param_table
 from .base import BSDFSample, BSDFType, GLOSSY, REFLECTION, SPECULAR, TRANSMISSION
 from .fresnel import fresnel_dielectric, lookup_ior, reflect, reflect_about, refract, refract_about
 from .microfacet import BECKMANN, GGX, Microfacet, VariantTable
@@ -156,6 +157,9 @@ class _Dielectric(BSDFType):
 
     def _add_common(self, loader, props, inst: dict) -> None:
         inst["eta"], inst["int_slot"], inst["ext_slot"] = _eta(loader, props, self._rough)
+        # A constant relative IOR is a scene parameter (Mitsuba's key ``<bsdf>.eta``);
+        # dispersive IORs are textures, already parameters of their own.
+        inst["owner"] = ParamOwner(props.path, eta=mi.Float(inst["eta"])) if inst["int_slot"] == _NO_TEXTURE else None
         for name in ("specular_reflectance", "specular_transmittance"):
             inst[name] = (load_spectrum(loader, props.raw(name), props.key(name), emitter=False)
                           if props.has(name) else None)
@@ -167,8 +171,11 @@ class _Dielectric(BSDFType):
         self.instances.append(inst)
         return len(self.instances) - 1
 
+    def param_owners(self) -> list:
+        return [i["owner"] for i in self.instances if i["owner"] is not None]
+
     def build(self) -> None:
-        self.eta = mi.Float([i["eta"] for i in self.instances])
+        self.eta = param_table([i["owner"].params["eta"] if i["owner"] else i["eta"] for i in self.instances])
         self.dispersive = any(i["int_slot"] != _NO_TEXTURE for i in self.instances)
         if self.dispersive:
             self.int_slot = mi.UInt32([i["int_slot"] for i in self.instances])

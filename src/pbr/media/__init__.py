@@ -28,6 +28,7 @@ import numpy as np
 
 from ..backend import VariantStruct
 from ..phase import HG, RAYLEIGH, G_MAX, phase_eval, phase_sample
+from ..scene.params import ParamOwner, param_table
 from ..scene.props import Props, SceneError
 from .grid import GridTable, MAJORANT_RES, as_grid, cell_maxima, read_vol
 
@@ -70,6 +71,11 @@ class MediumSet:
         self.media: list[_Medium] = []
         self.grids = GridTable()
 
+    def param_owners(self) -> list:
+        """Differentiable medium parameters besides the constant spectra (textures):
+        single-channel voxel grids (``<medium>.<sigma_t|albedo>.data``) and ``scale``."""
+        return [o for _, o in self.grids.owners] + [m.owner for m in self.media]
+
     def __len__(self):
         return len(self.media)
 
@@ -88,6 +94,7 @@ class MediumSet:
         else:  # pragma: no cover - the loader dispatches on MEDIUM_LIKE
             raise SceneError(f"{props.path}: unknown medium type {t!r}")
         self._emission(loader, props, m)
+        m.owner = ParamOwner(props.path, scale=mi.Float(m.scale))
         m.phase = self._phase(props)
         if props.has("sample_emitters") and not props.bool("sample_emitters"):
             raise props.error("sample_emitters", "only sample_emitters=true is supported")
@@ -129,12 +136,12 @@ class MediumSet:
         v = props.raw(name, default)
         if isinstance(v, dict) and v.get("type") == "gridvolume":
             from ..textures import load_spectrum
-            gid, to_local = self._gridvolume(loader, Props(v, props.key(name), loader), form)
+            gid, to_local = self._gridvolume(loader, Props(v, props.key(name), loader), form, props.key(name))
             self._set_bounds(m, to_local, props.key(name))
             return load_spectrum(loader, 1.0, props.key(name), emitter=False), gid
         return self._spectrum(loader, props, name, default, bounded=(form == "albedo")), NO_GRID
 
-    def _gridvolume(self, loader, p: Props, form):
+    def _gridvolume(self, loader, p: Props, form, path):
         if p.has("filename"):
             data, bbox = read_vol(loader.resolve_path(p.string("filename"), p.key("filename")))
         elif p.has("data"):
@@ -159,7 +166,7 @@ class MediumSet:
             to_local = np.linalg.inv(to_world)
         except np.linalg.LinAlgError:
             raise p.error("to_world", "the grid transform is singular") from None
-        return self.grids.add(data, form), to_local
+        return self.grids.add(data, form, path), to_local
 
     @staticmethod
     def _set_bounds(m, to_local, where):
@@ -203,7 +210,7 @@ class MediumSet:
         dens = as_grid(props.raw("density"), props.key("density")) if props.has("density") else None
         if dens is None or dens.shape[3] != 1:
             raise props.error("density", "expected a (nz, ny, nx) density grid")
-        m.g1 = m.g2 = self.grids.add(dens, "unbounded")
+        m.g1 = m.g2 = self.grids.add(dens, "unbounded", props.key("density"))
         self._bounds(props, m)
 
     def _rgbgrid(self, loader, props, m):
@@ -280,7 +287,7 @@ class MediumSet:
         self.s2 = u32(m.s2 for m in ms)
         self.g1 = u32(m.g1 for m in ms)
         self.g2 = u32(m.g2 for m in ms)
-        self.scale = mi.Float([m.scale for m in ms])
+        self.scale = param_table([m.owner.params["scale"] for m in ms])
         self.le = u32(m.le if m.le is not None else 0 for m in ms)
         self.has_le_of = mi.Bool([m.le is not None for m in ms])
         self.ge = u32(m.ge for m in ms)
@@ -366,7 +373,11 @@ class MediumSet:
 
     def majorant(self, m, cell, wl, active):
         """sigma_maj of medium ``m`` in majorant cell ``cell`` (ignored for homogeneous
-        media, whose majorant is sigma_t itself)."""
+        media, whose majorant is sigma_t itself); detached: it only steers sampling."""
+        with dr.suspend_grad():
+            return self._majorant(m, cell, wl, active)
+
+    def _majorant(self, m, cell, wl, active):
         x, y, scale = self._factors(m, wl, active)
         if self.has_grid:
             grid = active & dr.gather(mi.Bool, self.is_grid, m, active)

@@ -81,12 +81,30 @@ class GridTable:
 
     def __init__(self):
         self.grids: list[tuple[np.ndarray, str]] = []
+        self.owners: list = []
 
-    def add(self, grid: np.ndarray, form: str) -> int:
+    def add(self, grid: np.ndarray, form: str, path: str | None = None) -> int:
         """Add a (nz, ny, nx, c) grid; RGB grids are upsampled in ``form`` ('albedo' or
-        'unbounded'). Returns the grid index."""
+        'unbounded'). A single-channel grid given a ``path`` is the differentiable scene
+        parameter ``<path>.data`` (Mitsuba's gridvolume key). Returns the grid index."""
         self.grids.append((grid, form))
+        if path is not None and grid.shape[3] == 1:
+            from ..scene.params import ParamOwner
+            self.owners.append((len(self.grids) - 1, ParamOwner(path, data=mi.TensorXf(grid))))
         return len(self.grids) - 1
+
+    def _sync(self) -> dict:
+        """Copy the current parameter values into the numpy grids (majorants and bounds
+        are built from them, detached); returns grid index -> differentiable flat data."""
+        ad = {}
+        for gid, owner in self.owners:
+            data = owner.params["data"]
+            g, form = self.grids[gid]
+            if tuple(data.shape) != g.shape:
+                raise ValueError(f"{owner.path}.data: shape {tuple(data.shape)} must stay {g.shape}")
+            self.grids[gid] = (np.maximum(np.asarray(dr.detach(data), np.float32), 0.0), form)
+            ad[gid] = dr.maximum(data.array, 0.0)
+        return ad
 
     def max_bound(self, gid: int) -> np.ndarray:
         """Per-voxel upper bound of the grid's value over all wavelengths (nz, ny, nx)."""
@@ -98,20 +116,21 @@ class GridTable:
         return 2.0 * g.max(axis=3) if form == "unbounded" else np.minimum(1.0, 2.0 * g.max(axis=3))
 
     def build(self) -> None:
+        ad = self._sync()
         flat, offs, res, chans = [], [], [], []
         off = 0
-        for g, form in self.grids:
+        for gid, (g, form) in enumerate(self.grids):
             nz, ny, nx, c = g.shape
             if c == 3:
                 g = _rgb_voxels(g.reshape(-1, 3), form).reshape(nz, ny, nx, 4)
                 c = 4
-            flat.append(g.ravel())
+            flat.append(ad[gid] if gid in ad else mi.Float(g.ravel().astype(np.float32)))
             offs.append(off)
             res.append((nx, ny, nz))
             chans.append(c)
             off += g.size
         self.has_rgb = 4 in chans
-        self.data = mi.Float(np.concatenate(flat).astype(np.float32)) if flat else mi.Float(0.0)
+        self.data = dr.concat(flat) if len(flat) > 1 else (flat[0] if flat else mi.Float(0.0))
         self.offset = mi.UInt32(offs or [0])
         r = np.array(res or [(1, 1, 1)], np.int64)
         self.res = mi.Vector3i(r[:, 0].tolist(), r[:, 1].tolist(), r[:, 2].tolist())

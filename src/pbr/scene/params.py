@@ -9,13 +9,35 @@ to rebuild the scene's tables (which keeps the AD graph to the parameters).
 from __future__ import annotations
 
 import drjit as dr
+import mitsuba as mi
+
+
+class ParamOwner:
+    """Parameters owned by one scene object outside the texture table (a BSDF's IOR, an
+    environment map's texels, a medium's voxel grid): ``params`` maps a name to a Dr.Jit
+    value; the key is ``<path>.<name>``."""
+
+    def __init__(self, path: str, **params):
+        self.path = path.split(".", 1)[1] if path.startswith("scene.") else path
+        self.params = params
+
+
+def param_table(values) -> "mi.Float":
+    """A ``mi.Float`` table of per-instance scalars (Python floats or width-1 Dr.Jit
+    arrays), built by scatters so that parameters with gradients stay attached."""
+    plain = [v if isinstance(v, (int, float)) else 0.0 for v in values]
+    table = mi.Float(plain)
+    for i, v in enumerate(values):
+        if not isinstance(v, (int, float)):
+            dr.scatter(table, mi.Float(v), mi.UInt32(i))
+    return table
 
 
 class SceneParameters:
     def __init__(self, scene):
         self.scene = scene
         self._owners = {}
-        for tex in scene.textures.param_owners():
+        for tex in scene.param_owners():
             for name in tex.params:
                 self._owners[f"{tex.path}.{name}"] = (tex, name)
         self._dirty = set()

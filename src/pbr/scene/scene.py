@@ -42,8 +42,16 @@ class Scene:
         """Samples per pixel requested by the first sensor's sampler."""
         return self.sensors[0].sampler.sample_count
 
+    def param_owners(self) -> list:
+        """Every object whose ``params`` are scene parameters (see ``pbr.traverse``)."""
+        owners = list(self.textures.param_owners())
+        for group in (self.bsdfs.families, self.lights.families):
+            for fam in group.values():
+                owners += getattr(fam, "param_owners", lambda: [])()
+        return owners + self.media.param_owners()
+
     def requires_grad(self) -> bool:
-        return any(dr.grad_enabled(v) for t in self.textures.param_owners() for v in t.params.values())
+        return any(dr.grad_enabled(v) for t in self.param_owners() for v in t.params.values())
 
     def __repr__(self):
         w, h = self.sensors[0].film.size
