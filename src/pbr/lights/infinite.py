@@ -68,6 +68,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..scene.params import ParamOwner, param_table
 from .. import spectrum as spec
 from ..textures import load_spectrum, BITMAP, CHECKERBOARD, COMPOSITE, OP_SCALE, OP_CHECKER
 from .base import LightType, LightSample
@@ -247,23 +248,38 @@ class EnvMapLight(LightType):
 
     def _parse(self, loader, props) -> dict:
         img = _env_image(loader, props)
-        inst = {"rgb": img, "scale": props.float("scale", 1.0, min=0.0), "rot": _rotation(props),
+        scale = props.float("scale", 1.0, min=0.0)
+        inst = {"rgb": img, "scale": scale, "rot": _rotation(props),
+                # Mitsuba's keys: ``<id>.data`` (H, W, 3 linear RGB texels) and ``<id>.scale``.
+                "owner": ParamOwner(props.path, data=mi.TensorXf(img), scale=mi.Float(scale)),
                 "mis_compensation": props.bool("mis_compensation", False) if self.name == "envmap" else False,
                 "id": props.id}
         return inst
 
+    def param_owners(self) -> list:
+        return [i["owner"] for i in self.instances]
+
     # -- tables ---------------------------------------------------------------------------
     def _build_texels(self) -> None:
         """Per-texel (sigmoid coefficients, scale) of every instance, and the per-instance
-        constants: size, texel offset, scale and rotation."""
+        constants: size, texel offset, scale and rotation. The texels come from the
+        ``data`` parameters (differentiable); the sampling tables use their detached values."""
+        for i in self.instances:
+            data = i["owner"].params["data"]
+            if data.shape != i["rgb"].shape:
+                raise ValueError(f"{i['owner'].path}.data: shape {data.shape} must stay {i['rgb'].shape}")
+            i["rgb"] = np.maximum(np.asarray(dr.detach(data), np.float32), 0.0)
+            i["scale"] = float(dr.detach(i["owner"].params["scale"])[0])
         sizes = [(i["rgb"].shape[1], i["rgb"].shape[0]) for i in self.instances]
         offs = np.concatenate([[0], np.cumsum([w * h for w, h in sizes])[:-1]]).astype(np.uint32)
-        rgb = np.concatenate([i["rgb"].reshape(-1, 3) for i in self.instances])
-        coeffs, sc = spec.rgb_unbounded(mi.Color3f(rgb[:, 0], rgb[:, 1], rgb[:, 2]))
+        flat = dr.concat([i["owner"].params["data"].array for i in self.instances])
+        k = dr.arange(mi.UInt32, dr.width(flat) // 3) * 3
+        rgb = mi.Color3f(*(dr.maximum(dr.gather(mi.Float, flat, k + c), 0.0) for c in range(3)))
+        coeffs, sc = spec.rgb_unbounded(rgb)
         self.coeffs, self.tscale = mi.Array3f(coeffs), mi.Float(sc)
         self.size = mi.Array2u([w for w, _ in sizes], [h for _, h in sizes])
         self.tex_off = mi.UInt32(offs)
-        self.scale = mi.Float([i["scale"] for i in self.instances])
+        self.scale = param_table([i["owner"].params["scale"] for i in self.instances])
         # Rotation rows (world -> local is R^T: local_k = sum_m R[m, k] d_m).
         self.rot = [mi.Float([i["rot"][m, k] for i in self.instances]) for m in range(3) for k in range(3)]
         self.max_w = max(w for w, _ in sizes)
@@ -379,7 +395,7 @@ class EnvMapLight(LightType):
         (s01, f01), (s11, f11) = texel(r1 + i0), texel(r1 + i1)
         s = dr.lerp(dr.lerp(s00, s10, wx), dr.lerp(s01, s11, wx), wy)
         f = dr.lerp(dr.lerp(f00, f10, wx), dr.lerp(f01, f11, wx), wy)
-        sc = mi.Float(self.instances[0]["scale"]) if self.single else dr.gather(mi.Float, self.scale, idx, active)
+        sc = dr.gather(mi.Float, self.scale, idx if not self.single else mi.UInt32(0), active)
         return dr.select(active, s * (f * sc) * spec.d65(lam), 0.0)
 
     def Le(self, idx, d, wl, active):
