@@ -12,6 +12,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .backend import VariantStruct
 from .films import HDRFilm
 from .samplers import SAMPLERS, IndependentSampler
 from .scene.props import Props
@@ -88,6 +89,86 @@ class PerspectiveCamera:
         near_t, far_t = self.near_clip * inv_z, self.far_clip * inv_z
         o = mi.Point3f(m[0][3], m[1][3], m[2][3]) + dw * near_t
         return mi.Ray3f(o, dw, far_t - near_t, 0.0, mi.Spectrum(0))
+
+    # -- importance (light tracing, BDPT): pbrt-v4's We, PDF_We, SampleWi ------------------
+    def _tan_x(self) -> float:
+        return math.tan(math.radians(self.x_fov) / 2)
+
+    def film_area(self) -> float:
+        """Area A of the film's image on the plane z = 1 in camera space."""
+        t = self._tan_x()
+        return 4.0 * t * t / self.aspect
+
+    def _local(self, v):
+        """World vector -> camera space (the frame is rigid: its transpose inverts it)."""
+        m = self.to_world.tolist()
+        return mi.Vector3f(*[m[0][k] * v.x + m[1][k] * v.y + m[2][k] * v.z for k in range(3)])
+
+    def film_position(self, local_d):
+        """(film position in [0,1]^2 (x right, y down) of camera-space direction
+        ``local_d``, whether it lies on the film): the inverse of ``sample_ray``."""
+        t = self._tan_x()
+        inv_z = dr.rcp(local_d.z)
+        px = 0.5 * (1.0 - local_d.x * inv_z / t) - self.pp[0]
+        py = 0.5 * (1.0 - local_d.y * inv_z * (self.aspect / t)) - self.pp[1]
+        inside = (local_d.z > 0) & (px >= 0) & (px <= 1) & (py >= 0) & (py <= 1)
+        return mi.Point2f(px, py), inside
+
+    def We(self, ray):
+        """(importance We, film position) of a ray leaving the camera along ``ray.d``.
+        Units: the pinhole's importance is a delta in position (density 1) times
+        ``1 / (A cos^4 theta)``, so that int We cos theta d omega over the film is 1 and a
+        light-traced image matches the camera-traced one (pbrt-v4's normalisation; Mitsuba
+        returns We cos theta)."""
+        local = self._local(ray.d)
+        cos = local.z * dr.rsqrt(dr.squared_norm(local))
+        pos, inside = self.film_position(local)
+        c2 = cos * cos
+        return dr.select(inside, dr.rcp(self.film_area() * c2 * c2), 0.0), pos
+
+    def pdf_We(self, ray):
+        """(pdf_pos, pdf_dir) of ``sample_ray`` producing ``ray``: 1 (the pinhole, a delta in
+        position) and the solid-angle density ``1 / (A cos^3 theta)`` of a uniform film position."""
+        local = self._local(ray.d)
+        cos = local.z * dr.rsqrt(dr.squared_norm(local))
+        _, inside = self.film_position(local)
+        return mi.Float(1.0), dr.select(inside, dr.rcp(self.film_area() * cos * cos * cos), 0.0)
+
+    def sample_Wi(self, ref_p, u=None) -> "CameraWiSample":
+        """Connect point ``ref_p`` to the camera (pbrt-v4's ``SampleWi``): importance ``We``
+        of the ray from the pinhole toward ``ref_p``, unit direction ``wi`` from ``ref_p`` to
+        the pinhole, ``pdf`` = dist^2 / cos theta (solid angle at ``ref_p``), film position
+        ``pos``, the pinhole ``p``, and ``valid``: in front of the camera, between the
+        clip planes (in depth, as Mitsuba) and on the film. ``u`` is unused (a pinhole).
+        A surface vertex's contribution is ``beta * f(wi) |cos| * We / pdf``."""
+        m = self.to_world.tolist()
+        p = mi.Point3f(m[0][3], m[1][3], m[2][3])
+        d = p - ref_p
+        dist2 = dr.squared_norm(d)
+        inv_dist = dr.rsqrt(dist2)
+        wi = d * inv_dist
+        local = self._local(-d)
+        pos, inside = self.film_position(local)
+        valid = inside & (local.z >= self.near_clip) & (local.z <= self.far_clip) & (dist2 > 0)
+        cos = local.z * inv_dist
+        c2 = cos * cos
+        We = dr.select(valid, dr.rcp(self.film_area() * c2 * c2), 0.0)
+        pdf = dr.select(valid, dist2 / cos, 0.0)
+        return CameraWiSample(We, wi, pdf, pos, p, valid)
+
+
+class CameraWiSample(metaclass=VariantStruct):
+    """Result of :meth:`PerspectiveCamera.sample_Wi` (fields documented there)."""
+
+    _fields = {"We": "Float", "wi": "Vector3f", "pdf": "Float", "pos": "Point2f", "p": "Point3f", "valid": "Bool"}
+
+    def __init__(self, We=None, wi=None, pdf=None, pos=None, p=None, valid=None):
+        self.We = We if We is not None else mi.Float(0)
+        self.wi = wi if wi is not None else mi.Vector3f(0)
+        self.pdf = pdf if pdf is not None else mi.Float(0)
+        self.pos = pos if pos is not None else mi.Point2f(0)
+        self.p = p if p is not None else mi.Point3f(0)
+        self.valid = valid if valid is not None else mi.Bool(False)
 
 
 SENSORS = {"perspective": PerspectiveCamera}

@@ -205,6 +205,30 @@ class BSDFSet:
     def has_flag(self, flag: int) -> bool:
         return any(f.flags & flag for f in self.families.values())
 
+    def entry_flags(self) -> list[int]:
+        """Lobe flags of every entry (after ``build``): its family's, both components' for
+        a blend, plus TRANSMISSION where a mask lets light through."""
+        from .base import TRANSMISSION
+
+        def flags(i):
+            t, _, _, opacity = self.entries[i]
+            fl = self.families[t].flags | (TRANSMISSION if opacity != NO_BACK else 0)
+            if i in self.blend_of:
+                a, b, _ = self.blend_of[i]
+                fl |= flags(a) | flags(b)
+            return fl
+        return [flags(i) for i in range(len(self.entries))]
+
+    def shading_normal(self, bsdf_id, ctx, active):
+        """World shading normal of entry ``bsdf_id`` at ``ctx.si``, after its normal or
+        bump map (Mitsuba's ``BSDF::sh_frame``)."""
+        n = ctx.si.sh_frame.n
+        pert = self._perturb(bsdf_id, ctx, active)
+        if pert is None:
+            return n
+        _, frame, has = pert
+        return dr.select(has, ctx.si.to_world(frame.n), n)
+
     def _dispatch(self, method, bsdf_id, ctx, active, *args):
         local = dr.gather(mi.UInt32, self.local_of, bsdf_id, active)
         fams = [self.families[t] for t in self.order]

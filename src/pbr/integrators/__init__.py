@@ -1,8 +1,12 @@
 """Integrators, selected by the scene's ``integrator`` type."""
 
 from .base import SamplingIntegrator  # noqa: F401
-from .path import PathIntegrator
+from .path import PathIntegrator, PRBIntegrator
+from .prbvolpath import PRBVolPathIntegrator
+from .ptracer import ParticleTracerIntegrator
 from .volpath import SimpleVolPathIntegrator, VolPathIntegrator
 
 INTEGRATORS = {"path": PathIntegrator, "volpath": VolPathIntegrator, "volpathmis": VolPathIntegrator,
                "simplevolpath": SimpleVolPathIntegrator}
+INTEGRATORS.update(prb=PRBIntegrator, prbvolpath=PRBVolPathIntegrator)
+INTEGRATORS.update(ptracer=ParticleTracerIntegrator, lightpath=ParticleTracerIntegrator)

@@ -67,25 +67,38 @@ class SamplingIntegrator:
     def _film(self, scene, sensor, seed, spp, radiance, progress=None):
         """Develop an image from per-sample spectra ``radiance(rng, ray, wl, inside)``
         (radiance for the primal image, its derivative for forward mode): pass by pass,
-        accumulate w * XYZ and w per pixel, then convert to linear sRGB."""
+        accumulate w * XYZ and w per pixel, then convert to linear sRGB.
+
+        ``radiance`` may also return ``(spectrum, channels)``, ``channels`` a list of
+        per-sample ``mi.Float`` (AOVs): they are developed with the same filter weights
+        and appended after R, G, B, giving an (H, W, 3 + len(channels)) tensor."""
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
         sum_xyz = np.zeros((w * h, 3))
         sum_w = np.zeros(w * h)
+        sum_extra = None
         bar = _progress(n_pass, progress)
         for p in range(n_pass):
             with dr.suspend_grad():
                 rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
-                xyz = spec.to_xyz(radiance(rng, ray, wl, inside), wl) * weight
+                out = radiance(rng, ray, wl, inside)
+                L, extra = out if isinstance(out, tuple) else (out, ())
+                xyz = spec.to_xyz(L, wl) * weight
                 xyz = dr.select(dr.isfinite(xyz), xyz, 0.0)
-                sx, sw = _pixel_sums(xyz, weight, w * h, per_pass)
+                extra = [dr.select(dr.isfinite(c), c, 0.0) * weight for c in extra]
+                sx, sw, *se = _pixel_sums(xyz, weight, w * h, per_pass, extra)
             sum_xyz += sx
             sum_w += sw
+            if se:
+                sum_extra = se[0] if sum_extra is None else sum_extra + se[0]
             if bar:
                 bar.update(1)
         if bar:
             bar.close()
-        rgb = spec.xyz_to_srgb(sum_xyz / np.maximum(sum_w, 1e-30)[:, None])
-        return mi.TensorXf(rgb.astype(np.float32).reshape(h, w, 3))
+        norm = np.maximum(sum_w, 1e-30)[:, None]
+        rgb = spec.xyz_to_srgb(sum_xyz / norm)
+        if sum_extra is not None:
+            rgb = np.concatenate([rgb, sum_extra / norm], axis=1)
+        return mi.TensorXf(rgb.astype(np.float32).reshape(h, w, rgb.shape[1]))
 
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
         """Primal image: ``mi.TensorXf`` (H, W, 3), linear sRGB."""
@@ -139,17 +152,26 @@ class SamplingIntegrator:
         return np.maximum(sum_w, 1e-30)
 
 
-def _pixel_sums(xyz, weight, n_pixels, per_pass):
+def forward_derivative(Lo) -> mi.Spectrum:
+    """Forward-mode derivative of ``Lo`` w.r.t. the parameters' tangents. Only interior
+    gradients are cleared: the edges from the parameters to the scene tables must
+    survive, because one replay propagates several times."""
+    return mi.Spectrum(dr.forward_to(Lo, flags=dr.ADFlag.ClearInterior | dr.ADFlag.AllowNoGrad))
+
+
+def _pixel_sums(xyz, weight, n_pixels, per_pass, extra=()):
     """Per-pixel sums of w * XYZ and w over a pass's pixel-major samples, reduced inside
-    the rendering kernel (a local scatter-add), so per-sample values are never stored."""
+    the rendering kernel (a local scatter-add), so per-sample values are never stored.
+    With ``extra`` (already weighted per-sample channels) their sums come third."""
     pixel = dr.arange(mi.UInt32, dr.width(weight)) // per_pass
-    acc = dr.zeros(mi.Float, n_pixels * 4)
+    n_ch = 4 + len(extra)
+    acc = dr.zeros(mi.Float, n_pixels * n_ch)
     ch = [xyz[0], xyz[1], xyz[2], weight] if xyz is not None else [None, None, None, weight]
-    for k, v in enumerate(ch):
+    for k, v in enumerate(ch + list(extra)):
         if v is not None:
-            dr.scatter_reduce(dr.ReduceOp.Add, acc, v, pixel * 4 + k, mode=dr.ReduceMode.Local)
-    a = np.array(acc, dtype=np.float64).reshape(n_pixels, 4)
-    return a[:, :3], a[:, 3]
+            dr.scatter_reduce(dr.ReduceOp.Add, acc, v, pixel * n_ch + k, mode=dr.ReduceMode.Local)
+    a = np.array(acc, dtype=np.float64).reshape(n_pixels, n_ch)
+    return (a[:, :3], a[:, 3], a[:, 4:]) if extra else (a[:, :3], a[:, 3])
 
 
 def _snapshot(rng):
@@ -173,3 +195,23 @@ def mis_depth_limit(max_depth: int):
     """Mitsuba's max_depth: -1 = unlimited; otherwise paths have at most max_depth - 1
     bounces after the camera ray (max_depth = 1 shows only directly visible emitters)."""
     return math.inf if max_depth < 0 else max_depth
+
+
+def require_no_media(props) -> None:
+    """Surface-only integrators: a SceneError naming the integrator's key path when the
+    scene has participating media (they would be ignored silently otherwise)."""
+    if props.loader is not None and len(props.loader.media):
+        raise props.error(None, f"the {props.type!r} integrator does not support participating media "
+                                f"(use 'volpath')")
+
+
+def pbrt_max_depth(props, default: int = 5) -> int:
+    """Path-length limit of the pbrt-v4 integrators in Mitsuba's terms: pbrt-v4's
+    ``maxdepth`` counts scattering events (0: emitters seen directly), Mitsuba's
+    ``max_depth`` path segments, so ``max_depth = maxdepth + 1``. Either name is accepted
+    (not both); the limit must be finite (these integrators have no Russian roulette)."""
+    if props.has("maxdepth") and props.has("max_depth"):
+        raise props.error("max_depth", "give either 'maxdepth' (pbrt-v4) or 'max_depth' (Mitsuba), not both")
+    if props.has("max_depth"):
+        return props.int("max_depth", min=0)
+    return props.int("maxdepth", default, min=0) + 1

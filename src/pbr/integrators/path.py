@@ -21,14 +21,15 @@ from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
 from ..spectrum import first_only
-from .base import SamplingIntegrator, PRIMAL, BACKWARD
+from .base import SamplingIntegrator, PRIMAL, BACKWARD, forward_derivative
 
 
 class PathIntegrator(SamplingIntegrator):
     name = "path"
+    default_max_depth = -1
 
     def __init__(self, props):
-        self.max_depth = props.int("max_depth", -1, min=-1)
+        self.max_depth = props.int("max_depth", self.default_max_depth, min=-1)
         self.rr_depth = props.int("rr_depth", 5, min=0)
         self.hide_emitters = props.bool("hide_emitters", False)
         self.light_sampler = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
@@ -93,7 +94,10 @@ class PathIntegrator(SamplingIntegrator):
             u_light = rng.next_float32()
             u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
             smooth = active_next & bsdfs.smooth(bsdf_id, active_next)
-            ls = lights.sample_Li(si, u_light, u_pos, wl, smooth)
+            with dr.resume_grad(when=not primal):
+                # Attached: the sampled radiance ls.L depends on emitter parameters.
+                ls = lights.sample_Li(si, u_light, u_pos, wl, smooth)
+            ls.pdf = dr.detach(ls.pdf)
             em = smooth & (ls.pdf > 0)
             em &= geo.unoccluded(si, ls.p, em)
             wo_em = si.to_local(ls.wi)
@@ -129,7 +133,7 @@ class PathIntegrator(SamplingIntegrator):
                     if mode == BACKWARD:
                         dr.backward_from(dL * Lo)
                     else:
-                        dL_fwd += mi.Spectrum(dr.forward_to(Lo))
+                        dL_fwd += forward_derivative(Lo)
 
             beta[~skip] = beta * bs.weight
             eta[~skip] = eta * bs.eta
@@ -149,3 +153,11 @@ class PathIntegrator(SamplingIntegrator):
             active = skip | (cont & (~rr | survive) & (b_max > 0))
 
         return (L if primal else dL_fwd), valid
+
+
+class PRBIntegrator(PathIntegrator):
+    """``prb`` (Mitsuba's name): the same estimator, whose adjoint passes are Path Replay
+    Backpropagation; Mitsuba's default ``max_depth`` of 6."""
+
+    name = "prb"
+    default_max_depth = 6

@@ -20,7 +20,7 @@ from .goniometric import GoniometricLight
 from .directional import DirectionalLight, DistantLight
 from .infinite import ConstantLight, EnvMapLight, PortalEnvMapLight
 from .directionalarea import DirectionalAreaLight
-from .base import LightSample, LightType  # noqa: F401
+from .base import LightSample, LightType, LeSample  # noqa: F401
 from .lightsamplers import make_light_sampler, LightTable, LIGHT_SAMPLERS  # noqa: F401
 
 LIGHT_TYPES: dict[str, type] = {"area": AreaLight}
@@ -124,6 +124,16 @@ class LightSet:
         ls.pdf = ls.pdf * pmf
         return ls
 
+    def sample_Li_light(self, light, ref, u, wl, active) -> LightSample:
+        """Sample light ``light`` itself (no light-sampler pick; ``pdf`` is the light's
+        own density): for integrators that visit every light, e.g. ``whitted``."""
+        return self._dispatch("sample_Li", light, active, ref, u, wl)
+
+    @property
+    def n_lights(self) -> int:
+        """Number of lights after expansion (one per emissive triangle)."""
+        return dr.width(self.local_of) if self.entries else 0
+
     def pdf_Li(self, light, ref_p, ref_n, si, active):
         """Density of NEE reaching area-light hit ``si`` from (ref_p, ref_n)."""
         if "area" not in self.families:
@@ -154,6 +164,78 @@ class LightSet:
                 mi.UInt32(int(self.first_light[g])), ref_p, ref_n, active)
             out.append((Le, pdf))
         return out
+
+    # -- emission: rays leaving the lights (light tracing, BDPT, photon mapping) ---------
+    def prepare_emission(self, scene) -> None:
+        """Build the emission-side light sampler: lights are picked in proportion to their
+        power (pbrt-v4's ``PowerLightSampler`` for light paths), independently of any
+        shading point. Call it (outside kernels) before ``sample_Le``/``pmf_Le``, after
+        every scene (re)build; integrators do this at the start of ``render``."""
+        if self.unsupported_emission():
+            t = self.entries[self.unsupported_emission()[0]][0]
+            from ..scene.props import SceneError
+            raise SceneError(f"scene: the {t!r} emitter cannot emit light paths (no sample_Le)")
+        table = LightTable(self.entries, self.families, scene)
+        self.emission_sampler = make_light_sampler("power", table.powers)
+        self._emission_for = self.sampler
+
+    def unsupported_emission(self) -> list:
+        """Emitter indices (entries) whose family has no ``sample_Le``."""
+        return [g for g, (t, _) in enumerate(self.entries) if not self.families[t].emits_rays]
+
+    def _emission(self):
+        if getattr(self, "_emission_for", None) is not self.sampler:
+            raise RuntimeError("LightSet.prepare_emission(scene) must be called after each scene build")
+        return self.emission_sampler
+
+    def sample_Le(self, u_light, u_pos, u_dir, wl, active) -> LeSample:
+        """Pick a light in proportion to its power and sample a ray leaving it (see
+        :class:`pbr.lights.base.LeSample`). Lanes with nothing to emit have ``pdf_dir = 0``
+        and ``weight = 0``."""
+        if not self.entries:
+            return LeSample()
+        light, pmf = self._emission().sample(u_light, None, None, active)
+        light = mi.UInt32(light)
+        local = dr.gather(mi.UInt32, self.local_of, light, active)
+        fams = [self.families[t] for t in self.order]
+        if len(fams) == 1:
+            s = fams[0].sample_Le(local, u_pos, u_dir, wl, active)
+        else:
+            fam = dr.gather(mi.UInt32, self.family_of, light, active)
+            s = dr.switch(fam, [_typed_Le(f.sample_Le) for f in fams], local, u_pos, u_dir, wl, active)
+        s = _cast_Le(s)
+        ok = active & (s.pdf_pos > 0) & (s.pdf_dir > 0) & (pmf > 0)
+        cos = dr.select(s.delta_pos, 1.0, dr.abs(dr.dot(s.n, s.d)))
+        s.pmf = dr.select(active, mi.Float(pmf), 0.0)
+        s.weight = dr.select(ok, s.L * (cos / (s.pmf * s.pdf_pos * s.pdf_dir)), 0.0)
+        s.pdf_dir = dr.select(ok, s.pdf_dir, 0.0)
+        s.light = light
+        return s
+
+    def pmf_Le(self, light, active=True):
+        """Probability that ``sample_Le`` picks light ``light``."""
+        return self._emission().pmf(light, None, None, active)
+
+    def pdf_Le(self, light, p, n, d, active):
+        """(pdf_pos, pdf_dir) with which light ``light`` emits the ray from ``p`` along
+        ``d`` (``n``: the shading normal at ``p`` for area lights; the pick probability
+        ``pmf_Le`` is not included). Delta components are reported as 1, as ``sample_Le``
+        does; for infinite lights ``d`` is the direction the light sends (opposite to the
+        escaped ray) and ``p`` is unused."""
+        return self._dispatch("pdf_Le", light, active, p, n, d)
+
+
+def _cast_Le(v):
+    return LeSample(o=mi.Point3f(v.o), d=mi.Vector3f(v.d), L=mi.Spectrum(v.L), pdf_pos=mi.Float(v.pdf_pos),
+                    pdf_dir=mi.Float(v.pdf_dir), n=mi.Normal3f(v.n), delta_pos=mi.Bool(v.delta_pos),
+                    delta_dir=mi.Bool(v.delta_dir), infinite=mi.Bool(v.infinite), pmf=mi.Float(v.pmf),
+                    weight=mi.Spectrum(v.weight), light=mi.UInt32(v.light))
+
+
+def _typed_Le(fn):
+    def wrapped(*args):
+        return _cast_Le(fn(*args))
+    return wrapped
 
 
 def _typed(fn):

@@ -26,7 +26,8 @@ import mitsuba as mi
 import numpy as np
 
 from ..textures import load_spectrum
-from .base import LightType, LightSample
+from ..sampling import square_to_cosine_hemisphere, cosine_hemisphere_pdf
+from .base import LightType, LightSample, LeSample
 
 # Mesh shapes that stay one light (Mitsuba builds a rectangle as two triangles).
 SINGLE_LIGHT_MESHES = ("Rectangle",)
@@ -238,7 +239,8 @@ class AreaLight(LightType):
             uv = dr.select(ok, uv0 * b0 + uv1 * b1 + uv2 * b2, uv)
         return p, ng, ns, uv
 
-    def sample_Li(self, idx, ref, u, wl, active) -> LightSample:
+    def _sample_point(self, idx, u, active, time=0.0):
+        """Uniform point (by area) on sub-light ``idx``: (p, geometric n, shading n, uv)."""
         planar = (TRIANGLE in self.kinds) or (PARALLELOGRAM in self.kinds)
         if planar:
             p, ng, ns, uv = self._sample_planar(idx, u, active)
@@ -247,11 +249,15 @@ class AreaLight(LightType):
             other = (dr.gather(mi.UInt32, self.kind, idx, active) == MITSUBA) if planar else mi.Bool(True)
             on = active & other
             shape = dr.gather(mi.ShapePtr, self.shape_ptrs, dr.gather(mi.UInt32, self.mi_shape, idx, on), on)
-            ps = shape.sample_position(ref.time, u, on)
+            ps = shape.sample_position(time, u, on)
             if planar:
                 p, ng, ns, uv = (dr.select(other, a, b) for a, b in ((ps.p, p), (ps.n, ng), (ps.n, ns), (ps.uv, uv)))
             else:
                 p, ng, ns, uv = ps.p, ps.n, ps.n, ps.uv
+        return p, ng, ns, uv
+
+    def sample_Li(self, idx, ref, u, wl, active) -> LightSample:
+        p, ng, ns, uv = self._sample_point(idx, u, active, ref.time)
         area = dr.gather(mi.Float, self.area, idx, active)
         d = p - ref.p
         dist2 = dr.squared_norm(d)
@@ -271,3 +277,28 @@ class AreaLight(LightType):
         cos_g = dr.abs(dr.dot(si.n, d)) * dr.rsqrt(dist2)
         ok = active & (cos_g > 0) & (area > 0)
         return dr.select(ok, dist2 / (cos_g * area), 0.0)
+
+    # -- emission (light tracing) ----------------------------------------------------------
+    emits_rays = True
+
+    def sample_Le(self, idx, u_pos, u_dir, wl, active) -> LeSample:
+        """A uniform point by area and a cosine-weighted direction about the shading normal
+        (the side that emits, as in ``L``); ``n`` is the geometric normal turned to that side."""
+        p, ng, ns, uv = self._sample_point(idx, u_pos, active)
+        area = dr.gather(mi.Float, self.area, idx, active)
+        local = square_to_cosine_hemisphere(u_dir)
+        d = mi.Frame3f(ns).to_world(local)
+        n = dr.select(dr.dot(ng, ns) < 0, -ng, ng)
+        ok = active & (area > 0) & (local.z > 0)
+        slot = dr.gather(mi.UInt32, self.radiance, idx, ok)
+        L = self.textures.eval(slot, uv, wl.lambda_, ok)
+        return LeSample(o=p, d=d, L=dr.select(ok, L, 0.0), pdf_pos=dr.select(ok, dr.rcp(area), 0.0),
+                        pdf_dir=dr.select(ok, cosine_hemisphere_pdf(local), 0.0), n=mi.Normal3f(n))
+
+    def pdf_Le(self, idx, p, n, d, active):
+        """(area density of point ``p``, solid-angle density of direction ``d``) of
+        ``sample_Le``; ``n``: the shading normal at ``p`` (e.g. ``si.sh_frame.n`` of a hit)."""
+        area = dr.gather(mi.Float, self.area, idx, active)
+        ok = active & (area > 0)
+        return (dr.select(ok, dr.rcp(area), 0.0),
+                dr.select(ok, dr.maximum(dr.dot(n, d), 0.0) * dr.inv_pi, 0.0))

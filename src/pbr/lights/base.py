@@ -66,3 +66,52 @@ class LightType:
     def pdf_Le_dir(self, idx, d, active):
         """Solid-angle density of ``sample_Li`` choosing direction ``d`` (infinite lights)."""
         return mi.Float(0.0)
+
+    # -- emission, for light tracing (see LeSample) -----------------------------------------
+    emits_rays = False  # whether the family implements sample_Le / pdf_Le
+
+    def sample_Le(self, idx, u_pos, u_dir, wl, active) -> "LeSample":
+        """A ray leaving the light (``pmf``, ``weight`` and ``light`` are filled in by
+        ``LightSet.sample_Le``)."""
+        raise NotImplementedError
+
+    def pdf_Le(self, idx, p, n, d, active):
+        """(pdf_pos, pdf_dir) with which ``sample_Le`` produces the ray (p, d); ``n``: the
+        surface normal at ``p`` (area lights)."""
+        raise NotImplementedError
+
+
+class LeSample(metaclass=VariantStruct):
+    """A ray leaving a light (pbrt-v4's ``SampleLe``, Mitsuba's ``sample_ray``), for light
+    tracing, BDPT and photon mapping.
+
+    ``o``, ``d``: the ray (origin on the light, unit direction away from it); ``L``: the
+    radiance (area, infinite lights), intensity (W/sr, point-like lights) or irradiance
+    (W/m^2, directional) carried along it at the sampled wavelengths; ``pdf_pos``: area
+    density of ``o`` (1/m^2; 1 for delta-position lights); ``pdf_dir``: solid-angle density
+    of ``d`` (1/sr; 1 for delta-direction lights); ``pmf``: the probability of having
+    picked this light; ``n``: the light's surface normal at ``o`` on its emitting side
+    (area lights), the ray direction (directional and infinite lights: the normal of the
+    disk ``o`` lies on), 0 for point-like lights; ``weight`` = ``L |n . d| / (pmf pdf_pos
+    pdf_dir)`` with ``|n . d|`` read as 1 for point-like lights: the throughput a light
+    path starts with (Mitsuba's ray weight). Flags: ``delta_pos``, ``delta_dir``,
+    ``infinite``; ``light``: the light's index (as in ``LightSet``)."""
+
+    _fields = {"o": "Point3f", "d": "Vector3f", "L": "Spectrum", "pdf_pos": "Float", "pdf_dir": "Float",
+               "pmf": "Float", "n": "Normal3f", "weight": "Spectrum", "delta_pos": "Bool", "delta_dir": "Bool",
+               "infinite": "Bool", "light": "UInt32"}
+
+    def __init__(self, o=None, d=None, L=None, pdf_pos=None, pdf_dir=None, n=None, delta_pos=None,
+                 delta_dir=None, infinite=None, pmf=None, weight=None, light=None):
+        self.o = o if o is not None else mi.Point3f(0)
+        self.d = d if d is not None else mi.Vector3f(0)
+        self.L = L if L is not None else mi.Spectrum(0)
+        self.pdf_pos = pdf_pos if pdf_pos is not None else mi.Float(0)
+        self.pdf_dir = pdf_dir if pdf_dir is not None else mi.Float(0)
+        self.pmf = pmf if pmf is not None else mi.Float(0)
+        self.n = n if n is not None else mi.Normal3f(0)
+        self.weight = weight if weight is not None else mi.Spectrum(0)
+        self.delta_pos = delta_pos if delta_pos is not None else mi.Bool(False)
+        self.delta_dir = delta_dir if delta_dir is not None else mi.Bool(False)
+        self.infinite = infinite if infinite is not None else mi.Bool(False)
+        self.light = light if light is not None else mi.UInt32(0)

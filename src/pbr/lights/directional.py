@@ -24,7 +24,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .base import LightType, LightSample
+from .base import LightType, LightSample, LeSample
 from .point import load_constant_emission, photometric, luminance, vec_table, gather3
 
 
@@ -100,6 +100,26 @@ class DirectionalLight(LightType):
         slot = dr.gather(mi.UInt32, self.slot, idx, active)
         E = self.textures.eval(slot, mi.Point2f(0.5), wl.lambda_, active) * dr.gather(mi.Float, self.factor, idx, active)
         return LightSample(dr.select(active, E, 0.0), -d, dr.select(active, 1.0, 0.0), p, mi.Bool(True))
+
+
+    # -- emission (light tracing) ----------------------------------------------------------
+    emits_rays = True
+
+    def sample_Le(self, idx, u_pos, u_dir, wl, active) -> LeSample:
+        """A ray along the light's direction from a uniform point of the disk of the
+        scene's bounding sphere that faces the light (pbrt-v4): ``pdf_pos = 1 / (pi r^2)``."""
+        d = gather3(mi.Vector3f, self.dir, idx, active)
+        disk = mi.warp.square_to_uniform_disk_concentric(u_pos)
+        fr = mi.Frame3f(d)
+        o = self.center + (fr.s * disk.x + fr.t * disk.y - d) * self.radius
+        slot = dr.gather(mi.UInt32, self.slot, idx, active)
+        E = self.textures.eval(slot, mi.Point2f(0.5), wl.lambda_, active) * dr.gather(mi.Float, self.factor, idx, active)
+        return LeSample(o=o, d=d, L=dr.select(active, E, 0.0), pdf_pos=mi.Float(1.0 / (math.pi * self.radius ** 2)),
+                        pdf_dir=mi.Float(1.0), n=mi.Normal3f(d), delta_dir=mi.Bool(True))
+
+    def pdf_Le(self, idx, p, n, d, active):
+        """(1 / (pi r^2), 1: the delta in direction, as ``sample_Le`` reports it)."""
+        return mi.Float(1.0 / (math.pi * self.radius ** 2)), mi.Float(1.0)
 
 
 class DistantLight(DirectionalLight):

@@ -23,7 +23,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..textures import load_spectrum
-from .base import LightType, LightSample
+from .base import LightType, LightSample, LeSample
 
 
 class DirectionalAreaLight(LightType):
@@ -114,3 +114,31 @@ class DirectionalAreaLight(LightType):
         slot = dr.gather(mi.UInt32, self.radiance, idx, hit)
         L = self.textures.eval(slot, si.uv, wl.lambda_, hit)
         return LightSample(dr.select(hit, L, 0.0), wi, dr.select(hit, 1.0, 0.0), mi.Point3f(si.p), mi.Bool(True))
+
+    # -- emission (light tracing) ----------------------------------------------------------
+    emits_rays = True
+
+    def _shape(self, idx, active):
+        """Mitsuba's shape of instance ``idx`` (for ``sample_position``)."""
+        to_pbr = np.array(self.geometry.to_pbr_shape, dtype=np.int64)
+        mi_index = mi.UInt32([int(np.flatnonzero(to_pbr == i["shape"])[0]) for i in self.instances])
+        k = dr.gather(mi.UInt32, mi_index, idx, active)
+        return dr.gather(mi.ShapePtr, self.geometry.mi_scene.shapes_dr(), k, active)
+
+    def sample_Le(self, idx, u_pos, u_dir, wl, active) -> LeSample:
+        """A uniform point of the shape (by area) and the ray along its normal (Mitsuba's
+        ``sample_ray``): ``pdf_pos = 1 / area``, a delta in direction."""
+        shape = self._shape(idx, active)
+        ps = shape.sample_position(0.0, u_pos, active)
+        area = dr.gather(mi.Float, mi.Float(self._area), idx, active)
+        ok = active & (area > 0)
+        slot = dr.gather(mi.UInt32, self.radiance, idx, ok)
+        L = self.textures.eval(slot, ps.uv, wl.lambda_, ok)
+        return LeSample(o=ps.p, d=mi.Vector3f(ps.n), L=dr.select(ok, L, 0.0),
+                        pdf_pos=dr.select(ok, dr.rcp(area), 0.0), pdf_dir=mi.Float(1.0), n=mi.Normal3f(ps.n),
+                        delta_dir=mi.Bool(True))
+
+    def pdf_Le(self, idx, p, n, d, active):
+        """(1 / area, 1: the delta in direction, as ``sample_Le`` reports it)."""
+        area = dr.gather(mi.Float, mi.Float(self._area), idx, active)
+        return dr.select(active & (area > 0), dr.rcp(area), 0.0), mi.Float(1.0)

@@ -71,7 +71,8 @@ import numpy as np
 from ..scene.params import ParamOwner, param_table
 from .. import spectrum as spec
 from ..textures import load_spectrum, BITMAP, CHECKERBOARD, COMPOSITE, OP_SCALE, OP_CHECKER
-from .base import LightType, LightSample
+from .base import LightType, LightSample, LeSample
+from .point import _Ref
 
 INV_4PI = 1.0 / (4.0 * math.pi)
 
@@ -195,6 +196,29 @@ def _dir_to_uv(d: mi.Vector3f) -> mi.Point2f:
     return mi.Point2f(u - dr.floor(u), dr.safe_acos(d.y) * dr.inv_pi)
 
 
+def _infinite_sample_Le(self, idx, u_pos, u_dir, wl, active) -> LeSample:
+    """Emission of an infinite light (pbrt-v4's ``SampleLe``): the direction toward the
+    light as ``sample_Li`` picks it (independent of the reference point for ``constant``
+    and ``envmap``), the ray starting on the disk of the scene's bounding sphere that faces
+    the light, uniformly: ``pdf_pos = 1 / (pi r^2)``, ``pdf_dir`` = the density of the
+    direction toward the light."""
+    c = mi.Point3f(*[float(x) for x in self.center])
+    ls = self.sample_Li(idx, _Ref(c), u_dir, wl, active)
+    d = -ls.wi
+    disk = mi.warp.square_to_uniform_disk_concentric(u_pos)
+    fr = mi.Frame3f(d)
+    o = c + (fr.s * disk.x + fr.t * disk.y - d) * self.radius
+    ok = active & (ls.pdf > 0)
+    return LeSample(o=o, d=d, L=dr.select(ok, ls.L, 0.0),
+                    pdf_pos=dr.select(ok, 1.0 / (math.pi * self.radius ** 2), 0.0),
+                    pdf_dir=dr.select(ok, ls.pdf, 0.0), n=mi.Normal3f(d), infinite=mi.Bool(True))
+
+
+def _infinite_pdf_Le(self, idx, p, n, d, active):
+    """(1 / (pi r^2), density of the direction -d toward the light) for a ray along ``d``."""
+    return (dr.select(active, 1.0 / (math.pi * self.radius ** 2), 0.0), self.pdf_Le_dir(idx, -d, active))
+
+
 # --------------------------------------------------------------------------- constant
 
 class ConstantLight(LightType):
@@ -233,12 +257,20 @@ class ConstantLight(LightType):
     def pdf_Le_dir(self, idx, d, active):
         return dr.select(active, INV_4PI, 0.0)
 
+    # emission (light tracing)
+    emits_rays = True
+    sample_Le = _infinite_sample_Le
+    pdf_Le = _infinite_pdf_Le
+
 
 # --------------------------------------------------------------------------- envmap
 
 class EnvMapLight(LightType):
     name = "envmap"
     infinite = True
+    emits_rays = True                  # light tracing: sample_Le / pdf_Le
+    sample_Le = _infinite_sample_Le
+    pdf_Le = _infinite_pdf_Le
 
     def add(self, loader, props, shape_index=None) -> int:
         inst = self._parse(loader, props)
@@ -450,6 +482,7 @@ class EnvMapLight(LightType):
 class PortalEnvMapLight(EnvMapLight):
     name = "portalenvmap"
     needs_ref = True   # Le and pdf_Le_dir depend on the ray origin
+    emits_rays = False  # no sample_Le: its emission depends on the ray origin
 
     def add(self, loader, props, shape_index=None) -> int:
         inst = self._parse(loader, props)

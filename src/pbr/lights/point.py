@@ -27,7 +27,7 @@ import numpy as np
 from .. import spectrum as spec
 from ..textures import (load_spectrum, ConstantSpectrum, Checkerboard, Bitmap, Composite,
                         BASE_ONE, BASE_SIGMOID, BASE_TABLE, OP_CHECKER)
-from .base import LightType, LightSample
+from .base import LightType, LightSample, LeSample
 
 
 # ------------------------------------------------------------------ shared helpers
@@ -171,6 +171,38 @@ class DeltaPositionLight(LightType):
 
     def _position(self, i):
         return self.instances[i]["to_world"][:3, 3]
+
+    # -- emission (light tracing) ----------------------------------------------------------
+    emits_rays = True
+
+    def sample_Le(self, idx, u_pos, u_dir, wl, active) -> LeSample:
+        """A uniformly distributed direction; its intensity is what ``sample_Li`` delivers to
+        a point at distance 1 along it (times that distance^2, exactly). Families with a
+        narrower emission profile (``spot``) override this with a better density."""
+        d = mi.warp.square_to_uniform_sphere(u_dir)
+        p = gather3(mi.Point3f, self.pos, idx, active)
+        ref = _Ref(p + d)
+        ls = self.sample_Li(idx, ref, u_pos, wl, active)
+        ok = active & (ls.pdf > 0)
+        I = ls.L * dr.squared_norm(ls.p - ref.p)
+        return LeSample(o=p, d=d, L=dr.select(ok, I, 0.0), pdf_pos=mi.Float(1.0),
+                        pdf_dir=dr.select(ok, UNIFORM_SPHERE_PDF, 0.0), delta_pos=mi.Bool(True))
+
+    def pdf_Le(self, idx, p, n, d, active):
+        """(1: the delta in position, as ``sample_Le`` reports it; density of ``d``)."""
+        return mi.Float(1.0), dr.select(active, UNIFORM_SPHERE_PDF, 0.0)
+
+
+UNIFORM_SPHERE_PDF = 1.0 / (4.0 * math.pi)
+
+
+class _Ref:
+    """A bare reference point for ``sample_Li`` (only ``p`` and ``time`` are read)."""
+
+    def __init__(self, p):
+        self.p = p
+        self.time = 0.0
+        self.n = mi.Normal3f(0.0)
 
 
 # ------------------------------------------------------------------------ point

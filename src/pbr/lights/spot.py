@@ -20,9 +20,9 @@ import mitsuba as mi
 import numpy as np
 
 from ..textures import load_spectrum
-from .base import LightSample
+from .base import LightSample, LeSample
 from .point import (DeltaPositionLight, load_constant_emission, power_factor, light_frame, spatially_varying,
-                    mat_rows, apply_rows, point_bounds, max_value, luminance)
+                    mat_rows, apply_rows, point_bounds, max_value, luminance, gather3, _Ref)
 
 
 def spot_solid_angle(cutoff_rad: float, beam_rad: float) -> float:
@@ -104,3 +104,41 @@ class SpotLight(DeltaPositionLight):
                                    illuminant=False)
             L = dr.select(with_tex, L * t, L)
         return LightSample(dr.select(ok, L, 0.0), wi, dr.select(ok, 1.0, 0.0), p, mi.Bool(True))
+
+    # -- emission (light tracing) ----------------------------------------------------------
+    def _cone_ok(self) -> bool:
+        """Cone sampling needs rigid frames (a sheared frame distorts the cone's density)."""
+        return all(np.allclose(i["to_world"][:3, :3].T @ i["to_world"][:3, :3],
+                               np.eye(3) * np.cbrt(np.linalg.det(i["to_world"][:3, :3])) ** 2, atol=1e-5)
+                   for i in self.instances)
+
+    def sample_Le(self, idx, u_pos, u_dir, wl, active):
+        """A direction uniform inside the cutoff cone (pbrt-v4's ``SampleLe``), with the
+        intensity that ``sample_Li`` delivers at distance 1."""
+        if not self._cone_ok():
+            return super().sample_Le(idx, u_pos, u_dir, wl, active)
+        cos_c = dr.gather(mi.Float, self.cos_cutoff, idx, active)
+        local = mi.warp.square_to_uniform_cone(u_dir, cos_c)
+        fwd = [gather3(mi.Vector3f, row, idx, active) for row in self.fwd_rows()]
+        d = dr.normalize(mi.Vector3f(dr.dot(fwd[0], local), dr.dot(fwd[1], local), dr.dot(fwd[2], local)))
+        p = gather3(mi.Point3f, self.pos, idx, active)
+        ref = _Ref(p + d)
+        ls = self.sample_Li(idx, ref, u_pos, wl, active)
+        ok = active & (ls.pdf > 0)
+        I = ls.L * dr.squared_norm(ls.p - ref.p)
+        return LeSample(o=p, d=d, L=dr.select(ok, I, 0.0), pdf_pos=mi.Float(1.0),
+                        pdf_dir=dr.select(active, mi.warp.square_to_uniform_cone_pdf(local, cos_c), 0.0),
+                        delta_pos=mi.Bool(True))
+
+    def pdf_Le(self, idx, p, n, d, active):
+        if not self._cone_ok():
+            return super().pdf_Le(idx, p, n, d, active)
+        local = apply_rows(self.inv_rows, idx, d, active)
+        cos_t = local.z * dr.rsqrt(dr.squared_norm(local))
+        cos_c = dr.gather(mi.Float, self.cos_cutoff, idx, active)
+        inside = active & (cos_t >= cos_c)
+        return mi.Float(1.0), dr.select(inside, dr.rcp(dr.two_pi * (1.0 - cos_c)), 0.0)
+
+    def fwd_rows(self):
+        """Rows of each instance's light-to-world 3x3 matrix."""
+        return mat_rows([i["to_world"][:3, :3] for i in self.instances])

@@ -75,16 +75,19 @@ def start(media, m, ray: mi.Ray3f, t_max, active) -> MajorantIterator:
     return it
 
 
-def step(media, it: MajorantIterator, m, wl, u, active):
+def step(media, it: MajorantIterator, m, wl, u, active, factor: float = 1.0):
     """One step: sample a tentative collision in the current segment with the first
     wavelength's majorant. Returns (collided, T_maj over the distance advanced, sigma_maj,
     done); ``it.t`` is the collision point or the segment's end, and ``done`` means the
-    walk reached ``t_end`` without a collision."""
+    walk reached ``t_end`` without a collision. ``factor`` inflates grid majorants (more
+    null collisions; the differentiable integrator needs sigma_maj > sigma_t)."""
     sigma_maj = mi.Spectrum(media.majorant(m, it.cell, wl, active))
     seg_end = mi.Float(it.t_end)
     grid = mi.Bool(False)
     if media.has_grid:
         grid = active & dr.gather(mi.Bool, media.is_grid, m, active)
+        if factor != 1.0:
+            sigma_maj = dr.select(grid, sigma_maj * factor, sigma_maj)
         seg_end[grid] = dr.minimum(seg_end, dr.minimum(it.t_next.x, dr.minimum(it.t_next.y, it.t_next.z)))
     s0 = sigma_maj[0]
     t_c = it.t - dr.log(1.0 - u) * dr.rcp(s0)

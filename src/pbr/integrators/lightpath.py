@@ -1,0 +1,237 @@
+"""Building blocks shared by the integrators that trace paths from the lights
+(``ptracer``, ``bdpt``, ``sppm``).
+
+* :class:`SplatFilm`: contributions at arbitrary film positions, scatter-added into an
+  image with the film's reconstruction filter (as Mitsuba's particle tracer splats), and
+  developed as ``sum / spp``; :class:`LightTracingIntegrator` renders the ordinary
+  camera-sample image and adds the splatted one (BDPT's t = 1 strategies, a particle
+  tracer's camera connections).
+* Importance transport (pbrt-v4's ``TransportMode::Importance``): pbr's BSDFs compute the
+  radiance-transport values; :func:`eval_importance` and :func:`sample_importance` turn
+  them into the adjoint BSDF used along light paths, and :func:`shading_correction` is
+  Veach's factor for shading normals.
+* :func:`start_light_path`, :func:`connect_to_camera`: the first and the last step of a
+  light path, with the sampling routines of the lights (``LightSet.sample_Le``) and of the
+  camera (``PerspectiveCamera.sample_Wi``).
+* :func:`check_light_paths`: the load-time check of the scene's emitters.
+
+Conventions: directions are world-space unit vectors unless named ``*_local``; along a
+light path ``si.wi`` points back toward the light (where the particle came from) and
+``wo`` toward where it goes next.
+"""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .. import spectrum as spec
+from ..bsdfs.base import TRANSMISSION, ShadingContext
+from ..scene.props import SceneError
+from .base import SamplingIntegrator
+
+# Mitsuba's ray offset (math::RayEpsilon): rays leaving a surface start this far (relative
+# to the magnitude of the point) along its normal.
+RAY_EPSILON = 1500.0 * 2.0 ** -24
+
+
+# ----------------------------------------------------------------------------- splatting
+
+class SplatFilm:
+    """An image of contributions splatted at film positions (XYZ sums, float32).
+
+    ``splat(pos, L, wl, active)`` adds the spectrum ``L`` (converted to XYZ with the
+    wavelengths' densities, as the camera film does) at film position ``pos`` in
+    [0,1]^2 (x right, y down), spread over the pixels the film's reconstruction filter
+    covers with weights normalised to sum to 1 over the full (unclipped) footprint, as
+    Mitsuba's ``ImageBlock(normalize=True)``: what falls outside the image is lost. It is a
+    scatter-add, so it may be called inside a render kernel (also inside its symbolic
+    loops); the sums are computed with that kernel. ``develop(scale)`` returns the linear
+    sRGB image ``scale * sum`` (H, W, 3), numpy float64; ``scale = 1 / spp`` when every
+    pixel's ``spp`` samples traced one light path each (``W H spp`` paths in all).
+    """
+
+    def __init__(self, camera):
+        self.width, self.height = camera.film.size
+        self.rfilter = camera.film.rfilter
+        self.buf = dr.zeros(mi.Float, self.width * self.height * 3)
+
+    def splat(self, pos, L, wl, active):
+        xyz = spec.to_xyz(L, wl)
+        self.splat_xyz(pos, xyz, active & dr.all(dr.isfinite(xyz)))
+
+    def splat_xyz(self, pos, xyz, active):
+        w, h = self.width, self.height
+        r = float(self.rfilter.radius)
+        # Pixel i covers [i, i + 1): its centre is at i + 1/2.
+        cx, cy = pos.x * w - 0.5, pos.y * h - 0.5
+        x0, y0 = dr.ceil(cx - r), dr.ceil(cy - r)
+        n = max(1, int(math.ceil(2.0 * r)))
+        wx = [self.rfilter.eval(x0 + i - cx) for i in range(n)]
+        wy = [self.rfilter.eval(y0 + j - cy) for j in range(n)]
+        sx, sy = wx[0], wy[0]
+        for i in range(1, n):
+            sx, sy = sx + wx[i], sy + wy[i]
+        norm = sx * sy
+        active = active & (norm > 0)
+        inv = dr.select(active, dr.rcp(norm), 0.0)
+        ix0, iy0 = mi.Int32(x0), mi.Int32(y0)
+        for j in range(n):
+            iy = iy0 + j
+            ok_y = active & (iy >= 0) & (iy < h) & (wy[j] > 0)
+            for i in range(n):
+                ix = ix0 + i
+                ok = ok_y & (ix >= 0) & (ix < w) & (wx[i] > 0)
+                wgt = wx[i] * wy[j] * inv
+                idx = mi.UInt32(iy * w + ix) * 3
+                for c in range(3):
+                    dr.scatter_reduce(dr.ReduceOp.Add, self.buf, xyz[c] * wgt, idx + c, ok)
+
+    def develop(self, scale: float) -> np.ndarray:
+        xyz = np.array(self.buf, dtype=np.float64).reshape(self.height, self.width, 3) * scale
+        return spec.xyz_to_srgb(xyz)
+
+
+class LightTracingIntegrator(SamplingIntegrator):
+    """A sampling integrator whose ``sample`` may also splat (into ``self.splats``, with
+    ``self.camera`` the sensor being rendered): ``render`` = the camera-sample image plus
+    the splatted image over ``spp``. Primal only."""
+
+    def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
+        scene.lights.prepare_emission(scene)
+        cam, w, h, spp, _, _ = self._plan(scene, sensor, spp)
+        self.camera = cam
+        self.splats = SplatFilm(cam)
+        try:
+            img = np.array(super().render(scene, sensor, seed, spp, progress), dtype=np.float64)
+            img[..., :3] += self.splats.develop(1.0 / spp)
+        finally:
+            self.splats = None
+        return mi.TensorXf(img.astype(np.float32))
+
+    def render_forward(self, scene, sensor=0, seed=0, spp=0):
+        raise NotImplementedError(f"{self.name}: derivatives are not supported (primal only)")
+
+    def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0):
+        raise NotImplementedError(f"{self.name}: derivatives are not supported (primal only)")
+
+
+# ----------------------------------------------------------------- importance transport
+
+def shading_correction(si, wi, wo):
+    """Veach's adjoint factor for shading normals, ``|wi.ns| |wo.ng| / (|wi.ng| |wo.ns|)``
+    (pbrt-v4's and Mitsuba's), and where both directions lie on the same side of the
+    geometric and the shading surface (elsewhere shading normals would leak light)."""
+    ng, ns = si.n, si.sh_frame.n
+    i_g, i_s = dr.dot(wi, ng), dr.dot(wi, ns)
+    o_g, o_s = dr.dot(wo, ng), dr.dot(wo, ns)
+    ok = (i_g * i_s > 0) & (o_g * o_s > 0)
+    corr = dr.abs((i_s * o_g) / (i_g * o_s))
+    return dr.select(ok, corr, 0.0), ok
+
+
+def eval_importance(bsdfs, bsdf_id, ctx, wo_local, active):
+    """(adjoint BSDF value f* |cos theta_o|, density of sampling ``wo_local``) at a light-path
+    vertex (``ctx.si.wi``: toward the light side). pbr's BSDFs give the radiance-transport
+    value, which for a transmission across an IOR change carries ``1 / eta^2`` (the
+    radiance scaling); importance transport does not (pbrt-v4, Mitsuba). For reflection the
+    value is used as it is (as Mitsuba does); for transmission it is the exact adjoint, the
+    radiance-transport value with the directions swapped: f*(wi, wo) = f(wo, wi), which
+    needs no IOR (only computed when the scene has a transmitting BSDF)."""
+    f, pdf = bsdfs.eval_pdf(bsdf_id, ctx, wo_local, active)
+    if not bsdfs.has_flag(TRANSMISSION):
+        return f, pdf
+    wi_local = ctx.si.wi
+    trans = active & (wi_local.z * wo_local.z < 0)
+    si = mi.SurfaceInteraction3f(ctx.si)
+    si.wi = wo_local
+    f_swap, _ = bsdfs.eval_pdf(bsdf_id, ShadingContext(si, ctx.wl), wi_local, trans)
+    ratio = dr.abs(wo_local.z) / dr.maximum(dr.abs(wi_local.z), 1e-20)
+    return dr.select(trans, f_swap * ratio, f), pdf
+
+
+def sample_importance(bsdfs, bsdf_id, ctx, u1, u2, active):
+    """A BSDF sample at a light-path vertex with the importance-transport weight: the
+    radiance weight times ``bs.eta^2`` (``bs.eta``: the relative IOR crossed, 1 for
+    reflection), which removes the radiance scaling of refraction."""
+    bs = bsdfs.sample(bsdf_id, ctx, u1, u2, active)
+    if bsdfs.has_flag(TRANSMISSION):
+        bs.weight = bs.weight * (bs.eta * bs.eta)
+    return bs
+
+
+# --------------------------------------------------------------------- light-path steps
+
+def spawn_from(p, n, d):
+    """A ray from ``p`` along ``d``, its origin moved off the surface of normal ``n`` (to
+    the side ``d`` points to) as Mitsuba's ``spawn_ray``; ``n = 0`` leaves it in place."""
+    mag = (1.0 + dr.max(dr.abs(p))) * RAY_EPSILON
+    off = dr.mulsign(mi.Vector3f(n) * mag, dr.dot(n, d))
+    return mi.Ray3f(p + off, d)
+
+
+def start_light_path(scene, rng, wl, active):
+    """Pick a light and sample a ray leaving it (4 random numbers): (``LeSample``, the
+    ray, the initial throughput ``beta``: the sample's weight, W/m^2/sr-free units such
+    that the expected sum of contributions reaching the film equals the image)."""
+    u_light = rng.next_float32()
+    u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
+    u_dir = mi.Point2f(rng.next_float32(), rng.next_float32())
+    ls = scene.lights.sample_Le(u_light, u_pos, u_dir, wl, active)
+    ray = spawn_from(ls.o, ls.n, ls.d)
+    return ls, ray, mi.Spectrum(ls.weight)
+
+
+def connect_to_camera(scene, camera, si, bsdf_id, wl, beta, active):
+    """Connect a light-path surface vertex ``si`` (reached with throughput ``beta``) to the
+    pinhole: (contribution to splat, film position, valid mask). The contribution is
+    ``beta f*(wi, wo) |cos| corr We / pdf`` with the adjoint BSDF toward the camera,
+    Veach's shading-normal factor and the camera's importance, zero where the shadow ray
+    is blocked."""
+    cs = camera.sample_Wi(si.p)
+    ok = active & cs.valid
+    ok &= scene.geometry.unoccluded(si, cs.p, ok)
+    wo_local = si.to_local(cs.wi)
+    ctx = ShadingContext(si, wl, scene.textures)
+    f, _ = eval_importance(scene.bsdfs, bsdf_id, ctx, wo_local, ok)
+    corr, side_ok = shading_correction(si, si.to_world(si.wi), cs.wi)
+    ok &= side_ok & (cs.pdf > 0)
+    contrib = beta * f * (corr * cs.We / dr.select(ok, cs.pdf, 1.0))
+    return dr.select(ok, contrib, 0.0), cs.pos, ok
+
+
+def check_light_paths(props, what: str) -> None:
+    """Load-time check for integrators that trace light paths: every emitter must be able
+    to emit rays (``sample_Le``), and the scene must have no participating media."""
+    loader = props.loader
+    if loader is None:
+        return
+    from ..lights import LIGHT_TYPES
+    paths = list(_emitter_paths(loader.d))
+    for g, (t, _) in enumerate(loader.lights.entries):
+        if not getattr(LIGHT_TYPES[t], "emits_rays", False):
+            where = paths[g] if g < len(paths) else "scene"
+            raise SceneError(f"{where}: the {what} integrator ({props.path}) cannot trace light paths from a "
+                             f"{t!r} emitter (supported: area, point, spot, projector, projection, goniometric, "
+                             "directional, distant, directionalarea, constant, envmap)")
+    if len(loader.media):
+        raise SceneError(f"{props.path}: the {what} integrator does not support participating media")
+
+
+def _emitter_paths(d):
+    """Key paths of the scene's emitters, in the order the loader adds them."""
+    from ..geometry import SHAPE_PARAMS
+    from ..scene.loader import EMITTER_LIKE
+    for key, v in d.items():
+        if key == "type" or not isinstance(v, dict):
+            continue
+        t = v.get("type")
+        if t in EMITTER_LIKE:
+            yield f"scene.{key}"
+        elif t in SHAPE_PARAMS:
+            for k, c in v.items():
+                if isinstance(c, dict) and c.get("type") in EMITTER_LIKE:
+                    yield f"scene.{key}.{k}"

@@ -1,0 +1,346 @@
+"""``prbvolpath``: differentiable volumetric path tracing (Path Replay Backpropagation
+through participating media, Mitsuba's ``prbvolpath`` estimator, Vicini et al. 2021).
+
+The primal estimator: free flights are sampled against the majorant with the first
+(hero) wavelength; at a tentative collision the event is *real* with probability
+``P = mean(sigma_t / sigma_maj)`` and *null* otherwise; a real event scatters with the
+weight ``sigma_s / (sigma_maj P)`` (absorption is a weight, not a termination) and a null
+event continues with ``sigma_n / (sigma_maj (1 - P))``. Next-event estimation to one
+light sample, MIS (power heuristic) against BSDF and phase sampling; shadow rays take the
+exact transmittance through homogeneous media and ratio tracking through grids.
+
+Derivatives (``FORWARD``/``BACKWARD``) replay the same path: every factor ``w`` that
+multiplies the throughput is recomputed *attached* to the scene parameters and
+``dL * L_rest * w / detach(w)`` is propagated, where ``L_rest`` is the radiance the path
+still collects after that factor; emitted and directly received radiance are
+propagated where they are added. Sampling is detached: distances, events and directions
+do not move with the parameters. So that null collisions carry the derivative of the
+transmittance, grid majorants are inflated by ``majorant_factor`` (Mitsuba's media use
+1.01; without it, regions where the majorant equals sigma_t never produce null
+collisions and the transmittance derivative there is lost). Homogeneous media use the
+attached ``exp(-sigma_t t)`` directly (their majorant is sigma_t).
+
+Compared with ``volpath`` (the fast primal estimator, pbrt-v4's spectral MIS), this one
+tracks the hero wavelength only, as Mitsuba's spectral ``prbvolpath`` does, so chromatic
+media are noisier. Not supported: emissive media (``Le``).
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from ..bsdfs.base import ShadingContext
+from ..lights.lightsamplers import LIGHT_SAMPLERS
+from ..media import majorant
+from ..sampling import power_heuristic
+from ..scene.props import SceneError
+from ..spectrum import first_only
+from .base import PRIMAL, BACKWARD, forward_derivative
+from .volpath import SHADOW_EPSILON, VolPathIntegrator, _MediumAware
+
+
+def _ratio(w):
+    """w / detach(w) (0 where w is 0): the factor whose gradient is dw / w."""
+    wd = dr.detach(w)
+    return dr.select(wd != 0, w * dr.rcp(wd), 0.0)
+
+
+class PRBVolPathIntegrator(_MediumAware):
+    name = "prbvolpath"
+
+    def __init__(self, props):
+        self.max_depth = props.int("max_depth", 6, min=-1)
+        self.rr_depth = props.int("rr_depth", 5, min=0)
+        self.hide_emitters = props.bool("hide_emitters", False)
+        self.light_sampler = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
+        self.majorant_factor = props.float("majorant_factor", 1.1, min=1.0)
+        self.max_null = props.int("max_null_collisions", 1 << 16, min=1)
+        self._path = props.path
+        props.finish()
+
+    def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
+        if getattr(scene.media, "has_le", False):
+            raise SceneError(f"{self._path}: prbvolpath does not support emissive media (Le); use volpath")
+        if self.max_depth == 0:
+            return mi.Spectrum(0.0), mi.Bool(False)
+        return self._sample(scene, rng, ray, wl, mode, dL, L_in, active)
+
+    # -- helpers ----------------------------------------------------------------------
+    @staticmethod
+    def _grid_lanes(media, m, active):
+        if not media.has_grid:
+            return mi.Bool(False)
+        return active & dr.gather(mi.Bool, media.is_grid, m, active)
+
+    @staticmethod
+    def _propagate(mode, dL, mask, a, b, dL_fwd):
+        """Send ``dL * Lo`` backward, or add the forward derivative of ``Lo``, where
+        ``Lo = a * b`` on ``mask`` (recorded here: outside, AD is suspended)."""
+        with dr.resume_grad():
+            Lo = dr.select(mask, a * b, 0.0)
+            return PRBVolPathIntegrator._send(mode, dL, Lo, dL_fwd)
+
+    @staticmethod
+    def _send(mode, dL, Lo, dL_fwd):
+        if mode == BACKWARD:
+            # Some factors need not depend on the differentiated parameters (e.g. the
+            # transmittance when only an albedo is differentiated).
+            dr.backward_from(dL * Lo, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
+            return dL_fwd
+        return dL_fwd + forward_derivative(Lo)
+
+    @dr.syntax
+    def _transmittance(self, scene, rng, ray, p_light, medium, wl, mode, dL, adj, dL_fwd, active):
+        """Transmittance from ``ray.o`` to ``p_light`` through media and null surfaces:
+        exact in homogeneous media, ratio tracking in grids. In the adjoint modes, the
+        derivative of ``adj * T`` (adj: the detached contribution this T multiplies) is
+        propagated factor by factor (``dL``: the adjoint radiance). Returns (T, dL_fwd)."""
+        geo, media, bsdfs = scene.geometry, scene.media, scene.bsdfs
+        primal = mode == PRIMAL
+        T = mi.Spectrum(1.0)
+        going = mi.Bool(active)
+        med = mi.UInt32(medium)
+        ray = mi.Ray3f(ray)
+        n_null = mi.UInt32(0)
+        has_media = len(media) > 0
+        while dr.hint(going, label="prbvolpath_shadow"):
+            remaining = dr.norm(p_light - ray.o)
+            si, shape = geo.intersect(ray, going)
+            hit = going & si.is_valid() & (si.t < remaining * (1.0 - SHADOW_EPSILON))
+            t_end = dr.select(hit, si.t, remaining)
+            if has_media:
+                in_m = going & (med > 0)
+                m = med - 1
+                grid = self._grid_lanes(media, m, in_m)
+                homog = in_m & ~grid
+                with dr.resume_grad(when=not primal):
+                    st = media.eval(m, ray.o, wl, homog)
+                    w = dr.exp(-(st.sigma_a + st.sigma_s) * t_end)
+                    f = _ratio(w)
+                if not primal:
+                    dL_fwd = self._propagate(mode, dL, homog, adj, f, dL_fwd)
+                T[homog] = T * dr.detach(w)
+                it = majorant.start(media, m, ray, t_end, grid)
+                T_acc = mi.Spectrum(1.0)
+                inner = mi.Bool(grid)
+                while dr.hint(inner, label="prbvolpath_ratio_tracking"):
+                    coll, T_maj, sigma_maj, done = majorant.step(media, it, m, wl, rng.next_float32(), inner,
+                                                                 factor=self.majorant_factor)
+                    T_acc *= T_maj
+                    with dr.resume_grad(when=not primal):
+                        mp = media.eval(m, ray.o + ray.d * it.t, wl, coll)
+                        pdf = T_acc[0] * sigma_maj[0]
+                        w = T_acc * (sigma_maj - mp.sigma_a - mp.sigma_s) * dr.select(pdf > 0, dr.rcp(pdf), 0.0)
+                        f = _ratio(w)
+                    if not primal:
+                        dL_fwd = self._propagate(mode, dL, coll, adj, f, dL_fwd)
+                    T[coll] = T * dr.detach(w)
+                    T_acc[coll] = mi.Spectrum(1.0)
+                    n_null = dr.select(coll, n_null + 1, n_null)
+                    T[coll & (n_null >= self.max_null)] = mi.Spectrum(0.0)
+                    inner &= ~done & (dr.max(T) > 0)
+                t0 = T_acc[0]
+                T[grid] = T * dr.select(t0 > 0, T_acc * dr.rcp(t0), 0.0)
+            bid = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
+            passable = hit & bsdfs.is_null(bid, hit)
+            T[hit & ~passable] = mi.Spectrum(0.0)
+            med = VolPathIntegrator._enter(scene, shape, si, ray.d, med, passable)
+            nxt = si.spawn_ray(dr.normalize(p_light - si.p))
+            nxt.d = dr.normalize(p_light - nxt.o)
+            ray = dr.select(passable, nxt, ray)
+            going &= passable & (dr.max(T) > 0)
+        return T, dL_fwd
+
+    # -- the estimator --------------------------------------------------------------------
+    @dr.syntax
+    def _sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
+        geo, lights, bsdfs, tex, media = scene.geometry, scene.lights, scene.bsdfs, scene.textures, scene.media
+        primal = mode == PRIMAL
+        has_media = len(media) > 0
+        max_depth = self.max_depth if self.max_depth >= 0 else 0xFFFFFFFF
+
+        L = mi.Spectrum(0.0) if primal else mi.Spectrum(L_in)
+        dL_fwd = mi.Spectrum(0.0)
+        dL = mi.Spectrum(0.0) if dL is None else mi.Spectrum(dL)
+        beta = mi.Spectrum(1.0)
+        eta = mi.Float(1.0)
+        depth = mi.UInt32(0)
+        medium = mi.UInt32(self._medium)
+        prev_p = mi.Point3f(ray.o)
+        prev_n = mi.Normal3f(0.0)
+        prev_pdf = mi.Float(1.0)
+        prev_delta = mi.Bool(True)
+        valid = mi.Bool(False)
+        terminated = mi.Bool(False)
+        active = mi.Bool(active)
+        ray = mi.Ray3f(ray)
+        n_null = mi.UInt32(0)
+
+        while dr.hint(active, label="prbvolpath"):
+            si, shape = geo.intersect(ray, active)
+            hit = si.is_valid()
+            t_hit = dr.select(hit, si.t, dr.inf)
+
+            # -- free flight (delta tracking with real/null events) ----------------------
+            scattered = mi.Bool(False)
+            p_sc = mi.Point3f(0.0)
+            if has_media:
+                in_m = active & (medium > 0)
+                m = medium - 1
+                homog = in_m & ~self._grid_lanes(media, m, in_m)
+                it = majorant.start(media, m, ray, t_hit, in_m)
+                going = mi.Bool(in_m)
+                while dr.hint(going, label="prbvolpath_delta_tracking"):
+                    t_prev = mi.Float(it.t)
+                    coll, T_maj, sigma_maj, done = majorant.step(media, it, m, wl, rng.next_float32(), going,
+                                                                 factor=self.majorant_factor)
+                    p = ray.o + ray.d * it.t
+                    st_d = mi.Spectrum(0.0)
+                    with dr.resume_grad(when=not primal):
+                        mp = media.eval(m, p, wl, going)
+                        st = mp.sigma_a + mp.sigma_s
+                        st_d = dr.detach(st)
+                        P = dr.clip(dr.mean(st_d * dr.select(sigma_maj > 0, dr.rcp(sigma_maj), 0.0)), 0.0, 1.0)
+                        u_ev = rng.next_float32()
+                        real = coll & (u_ev < P)
+                        null = coll & ~real
+                        # Homogeneous: the majorant is sigma_t itself, attached.
+                        maj = dr.select(homog, st, sigma_maj)
+                        T_att = dr.select(homog, dr.exp(-st * (it.t - t_prev)), T_maj)
+                        pdf = T_maj[0] * dr.select(coll, sigma_maj[0], 1.0)
+                        ev = dr.select(real, mp.sigma_s * dr.rcp(P),
+                                       dr.select(null, (maj - st) * dr.rcp(1.0 - P), 1.0))
+                        w = T_att * ev * dr.select(pdf > 0, dr.rcp(pdf), 0.0)
+                        f = _ratio(w)
+                    if not primal:
+                        dL_fwd = self._propagate(mode, dL, going, L, f, dL_fwd)
+                    beta[going] = beta * dr.detach(w)
+                    p_sc[real] = p
+                    scattered |= real
+                    n_null = dr.select(null, n_null + 1, n_null)
+                    capped = null & (n_null >= self.max_null)
+                    beta[capped] = mi.Spectrum(0.0)
+                    going &= ~done & ~real & ~capped & (dr.max(beta) > 0)
+                n_null[active] = 0
+
+            # -- surface reached (or the ray escaped): emission, MIS-weighted ---------------
+            surf = active & ~scattered & hit & (dr.max(beta) > 0)
+            light = lights.light_of_hit(scene, shape, si, surf)
+            on_light = surf & (light > 0)
+            skip = on_light & (depth == 0) if self.hide_emitters else mi.Bool(False)
+            on_light &= ~skip
+            with dr.resume_grad(when=not primal):
+                Le = lights.L(light - 1, si, wl, on_light)
+                pdf_light = lights.pdf_Li(light - 1, prev_p, prev_n, si, on_light & ~prev_delta)
+                w_hit = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_light))
+                Le = dr.select(on_light, beta * Le * w_hit, 0.0)
+                if lights.has_infinite:
+                    escaped = active & ~scattered & ~hit & (dr.max(beta) > 0)
+                    if self.hide_emitters:
+                        escaped &= depth > 0
+                    for Le_inf, pdf_inf in lights.Le_escaped(ray.d, wl, prev_p, prev_n, escaped):
+                        w_inf = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_inf))
+                        Le += dr.select(escaped, beta * Le_inf * w_inf, 0.0)
+            if primal:
+                L = L + Le
+            else:
+                L = L - dr.detach(Le)
+                dL_fwd = self._propagate(mode, dL, True, Le, 1.0, dL_fwd)
+
+            bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, surf)
+            skip |= surf & bsdfs.is_null(bsdf_id, surf)
+            real = surf & ~skip
+            valid |= real | scattered
+            at_vertex = real | scattered
+            go_on = at_vertex & (depth + 1 < max_depth)
+            sc = go_on & scattered
+            rs = go_on & real
+
+            # -- next-event estimation ---------------------------------------------------------
+            ctx = ShadingContext(si, wl, tex)
+            nee = (rs & bsdfs.smooth(bsdf_id, rs)) | sc
+            ref = dr.zeros(mi.SurfaceInteraction3f)
+            ref.p = dr.select(sc, p_sc, si.p)
+            ref.n = dr.select(sc, mi.Normal3f(0.0), si.n)
+            ref.time = si.time
+            u_light = rng.next_float32()
+            u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u1 = rng.next_float32()
+            u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+            with dr.resume_grad(when=not primal):
+                ls = lights.sample_Li(ref, u_light, u_pos, wl, nee)
+                wo_em = si.to_local(ls.wi)
+                f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs)
+                if has_media:
+                    f_ph = media.phase_eval(medium - 1, -ray.d, ls.wi, sc)
+                    f_em = dr.select(sc, mi.Spectrum(f_ph), f_em)
+                    pdf_em = dr.select(sc, f_ph, pdf_em)
+                w_em = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf, dr.detach(pdf_em)))
+                Ld_unocc = dr.select(nee & (ls.pdf > 0), beta * f_em * ls.L * (w_em / ls.pdf), 0.0)
+            bs = dr.detach(bs)
+            sray = si.spawn_ray(ls.wi)
+            sray.o[sc] = p_sc
+            s_med = medium
+            if has_media:
+                s_med = VolPathIntegrator._enter(scene, shape, si, ls.wi, medium, nee & rs)
+            nee &= ls.pdf > 0
+            state = (type(rng.state)(rng.state), type(rng.inc)(rng.inc))
+            T_sh, _ = self._transmittance(scene, rng, sray, ls.p, s_med, wl, PRIMAL, dL, dL, dL_fwd, nee)
+            if primal:
+                L = L + dr.detach(Ld_unocc) * T_sh
+            else:
+                Ld = dr.detach(Ld_unocc) * T_sh
+                L = L - Ld
+                dL_fwd = self._propagate(mode, dL, True, Ld_unocc, T_sh, dL_fwd)
+                # Replay the shadow ray's random numbers for the transmittance derivative.
+                rng2 = type(rng)()
+                rng2.state, rng2.inc = type(state[0])(state[0]), type(state[1])(state[1])
+                _, dL_fwd = self._transmittance(scene, rng2, sray, ls.p, s_med, wl, mode, dL, Ld, dL_fwd, nee)
+
+            # -- continue: BSDF or phase function sampling ----------------------------------------
+            wi_next = si.to_world(bs.wo)
+            pdf_next = mi.Float(bs.pdf)
+            w_next = mi.Spectrum(bs.weight)
+            delta_next = mi.Bool(bs.delta)
+            if has_media:
+                wph, pph = media.phase_sample(medium - 1, -ray.d, mi.Point2f(rng.next_float32(), rng.next_float32()), sc)
+                wi_next = dr.select(sc, wph, wi_next)
+                pdf_next = dr.select(sc, pph, pdf_next)
+                w_next = dr.select(sc, mi.Spectrum(1.0), w_next)
+                delta_next = delta_next & ~sc
+            cont = go_on & (pdf_next > 0)
+            if not primal:
+                with dr.resume_grad():
+                    f_bs, _ = bsdfs.eval_pdf(bsdf_id, ctx, bs.wo, rs & cont & ~bs.delta)
+                    f_det = bs.weight * bs.pdf
+                    ratio = dr.select(f_det != 0, f_bs * dr.rcp(dr.detach(f_det)), 0.0)
+                    Lr = dr.select(rs & cont & ~bs.delta, L * dr.replace_grad(mi.Spectrum(1.0), ratio), 0.0)
+                dL_fwd = self._propagate(mode, dL, True, Lr, 1.0, dL_fwd)
+            if bsdfs.dispersive and primal:
+                term = rs & bs.terminate & ~terminated
+                L[term] = first_only(L)
+                beta[term] = first_only(beta)
+                terminated |= term
+            beta[cont] = beta * w_next
+            eta[rs] = eta * bs.eta
+            prev_p[cont] = ref.p
+            prev_n[cont] = ref.n
+            prev_pdf[cont] = pdf_next
+            prev_delta[cont] = delta_next
+            new_ray = si.spawn_ray(wi_next)
+            new_ray.o[sc] = p_sc
+            if has_media:
+                medium = VolPathIntegrator._enter(scene, shape, si, wi_next, medium, cont & rs)
+                medium = VolPathIntegrator._enter(scene, shape, si, ray.d, medium, skip)
+            ray = dr.select(cont, new_ray, dr.select(skip, si.spawn_ray(ray.d), ray))
+            depth[at_vertex] = depth + 1
+
+            # Russian roulette (detached survival probability).
+            q = dr.minimum(dr.max(beta) * eta * eta, 0.95)
+            rr = cont & (depth >= self.rr_depth)
+            survive = rng.next_float32() < q
+            beta[rr] = beta * dr.rcp(q)
+            active = skip | (cont & (~rr | survive) & (dr.max(beta) > 0))
+
+        return (L if primal else dL_fwd), valid

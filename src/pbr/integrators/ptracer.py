@@ -1,0 +1,172 @@
+"""``ptracer`` (Mitsuba's particle tracer; pbrt-v4's ``lightpath``): light tracing.
+
+``W H spp`` light paths (as Mitsuba): a light is picked in proportion to its power, a
+ray leaves it (``LightSet.sample_Le``) and scatters by BSDF sampling with the
+importance-transport BSDF; every surface vertex is connected to the pinhole
+(``sample_Wi``, a shadow ray) and its contribution is splatted onto the film with the
+reconstruction filter (:class:`pbr.integrators.lightpath.SplatFilm`; the image is the
+sum of splats over ``spp``). Emitters seen directly cannot be reached that way: each
+sample also traces a camera ray through a uniform point of its pixel and splats the
+emitted radiance it sees at that point (Mitsuba connects a point sampled on an emitter
+to the camera instead; both estimate the same splatted image, this one with far less
+noise on large emitters and environment maps).
+
+Mitsuba's conventions: ``max_depth`` (-1: unlimited; 1: only the emitters seen directly;
+2: direct lighting; a light path of ``k`` segments before its camera connection counts
+``k + 1``), ``rr_depth`` (Russian roulette once a light path has more than ``rr_depth``
+segments, survival ``min(max(beta) eta^2, 0.95)``), ``hide_emitters`` (emitters seen
+directly are left out; they still block light, unlike ``path``'s hide_emitters, as in
+Mitsuba's ptracer), ``samples_per_pass``. Surfaces seen through a specular (delta) BSDF
+only are black: a connection through a delta lobe has zero value, and camera paths are
+never extended. No participating media.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..bsdfs.base import ShadingContext
+from ..samplers import IndependentSampler
+from ..spectrum import SampledWavelengths, first_only
+from .base import SamplingIntegrator, _progress
+from .lightpath import (SplatFilm, check_light_paths, connect_to_camera, sample_importance, shading_correction,
+                        start_light_path)
+
+
+class ParticleTracerIntegrator(SamplingIntegrator):
+    name = "ptracer"
+
+    def __init__(self, props):
+        self.max_depth = props.int("max_depth", -1, min=-1)
+        self.rr_depth = props.int("rr_depth", 5, min=0)
+        self.hide_emitters = props.bool("hide_emitters", False)
+        self.samples_per_pass = props.int("samples_per_pass", -1, min=-1)
+        if self.samples_per_pass == 0:
+            raise props.error("samples_per_pass", "must be positive (or -1: automatic)")
+        props.finish()
+        check_light_paths(props, self.name)
+
+    def _plan(self, scene, sensor, spp):
+        cam, w, h, spp, per_pass, n_pass = super()._plan(scene, sensor, spp)
+        if self.samples_per_pass > 0:
+            if spp % self.samples_per_pass:
+                from ..scene.props import SceneError
+                raise SceneError(f"ptracer: sample_count ({spp}) must be a multiple of samples_per_pass "
+                                 f"({self.samples_per_pass})")
+            per_pass = min(spp, self.samples_per_pass)
+            n_pass = spp // per_pass
+        return cam, w, h, spp, per_pass, n_pass
+
+    def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
+        """``W H spp`` samples, pass by pass; each splats the emitter its camera ray sees
+        and the camera connections of one light path. Image: the splats over ``spp``."""
+        scene.lights.prepare_emission(scene)
+        cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
+        self.camera, self.splats = cam, SplatFilm(cam)
+        bar = _progress(n_pass, progress)
+        try:
+            for p in range(n_pass):
+                with dr.suspend_grad():
+                    self._pass(scene, cam, w, h, spp, per_pass, p, seed)
+                    dr.eval(self.splats.buf)
+                if bar:
+                    bar.update(1)
+            img = self.splats.develop(1.0 / spp)
+        finally:
+            if bar:
+                bar.close()
+            self.splats = None
+        return mi.TensorXf(img.astype(np.float32))
+
+    def _pass(self, scene, cam, w, h, spp, per_pass, pass_index, seed):
+        n = w * h * per_pass
+        idx = dr.arange(mi.UInt32, n)
+        pixel = idx // per_pass
+        sample_index = pixel * spp + dr.opaque(mi.UInt32, pass_index) * per_pass + (idx - pixel * per_pass)
+        rng = IndependentSampler.make_rng(sample_index, dr.opaque(mi.UInt32, seed & 0xFFFFFFFF))
+        wl = SampledWavelengths.sample_visible(rng.next_float32())
+        active = mi.Bool(True)
+        if self.max_depth == 0:
+            return
+        if not self.hide_emitters:
+            # A uniform film position in this sample's pixel, splatted like the light paths
+            # (so both estimate the same filtered image: Mitsuba's normalised splats).
+            pos = mi.Point2f((mi.Float(pixel % w) + rng.next_float32()) / w,
+                             (mi.Float(pixel // w) + rng.next_float32()) / h)
+            L = self._visible_emitters(scene, cam.sample_ray(pos), wl, active)
+            self.splats.splat(pos, L, wl, active)
+        if self.max_depth < 0 or self.max_depth > 1:
+            self._trace(scene, rng, wl, active)
+
+    def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
+        raise NotImplementedError("ptracer renders light paths (render), not camera samples")
+
+    def render_forward(self, scene, sensor=0, seed=0, spp=0):
+        raise NotImplementedError("ptracer: derivatives are not supported (primal only)")
+
+    def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0):
+        raise NotImplementedError("ptracer: derivatives are not supported (primal only)")
+
+    def _visible_emitters(self, scene, ray, wl, active):
+        """Radiance of the emitter (area or infinite) the camera ray sees, if any."""
+        lights = scene.lights
+        si, shape = scene.geometry.intersect(ray, active)
+        hit = active & si.is_valid()
+        light = lights.light_of_hit(scene, shape, si, hit)
+        on_light = hit & (light > 0)
+        L = dr.select(on_light, lights.L(light - 1, si, wl, on_light), 0.0)
+        if lights.has_infinite:
+            escaped = active & ~si.is_valid()
+            for Le, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), escaped):
+                L += dr.select(escaped, Le, 0.0)
+        return L
+
+    @dr.syntax
+    def _trace(self, scene, rng, wl, active):
+        """One light path; splats its camera connections into ``self.splats``."""
+        geo, bsdfs = scene.geometry, scene.bsdfs
+        camera, splats = self.camera, self.splats
+        max_depth = self.max_depth if self.max_depth >= 0 else 0x7FFFFFFF
+        dispersive = bsdfs.dispersive
+
+        ls, ray, beta = start_light_path(scene, rng, wl, active)
+        eta = mi.Float(1.0)
+        depth = mi.UInt32(1)            # segments so far (Mitsuba's count)
+        terminated = mi.Bool(False)
+        active = mi.Bool(active) & (ls.pdf_dir > 0) & (dr.max(beta) > 0) & (depth < max_depth)
+
+        while dr.hint(active, label="ptracer"):
+            si, shape = geo.intersect(ray, active)
+            active &= si.is_valid()
+            bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, active)
+
+            # Connect this vertex to the camera and splat.
+            contrib, pos, ok = connect_to_camera(scene, camera, si, bsdf_id, wl, beta, active)
+            splats.splat(pos, contrib, wl, ok)
+
+            # Scatter (importance transport) to the next vertex.
+            ctx = ShadingContext(si, wl, scene.textures)
+            bs = sample_importance(bsdfs, bsdf_id, ctx, rng.next_float32(),
+                                   mi.Point2f(rng.next_float32(), rng.next_float32()), active)
+            wo = si.to_world(bs.wo)
+            corr, side_ok = shading_correction(si, -ray.d, wo)
+            beta *= bs.weight * corr
+            eta *= bs.eta
+            if dispersive:
+                # Wavelength-dependent refraction: the first wavelength stands for all.
+                term = active & bs.terminate & ~terminated
+                beta[term] = first_only(beta)
+                terminated |= term
+            active &= side_ok & (bs.pdf > 0) & (dr.max(beta) > 0)
+            depth += 1
+            active &= depth < max_depth
+
+            # Russian roulette (Mitsuba's ptracer: beyond rr_depth segments).
+            q = dr.minimum(dr.max(beta) * eta * eta, 0.95)
+            rr = depth > self.rr_depth
+            survive = rng.next_float32() < q
+            beta[rr] = beta * dr.rcp(q)
+            active &= ~rr | survive
+            ray = si.spawn_ray(wo)
