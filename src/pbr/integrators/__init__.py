@@ -5,8 +5,16 @@ from .path import PathIntegrator, PRBIntegrator
 from .prbvolpath import PRBVolPathIntegrator
 from .ptracer import ParticleTracerIntegrator
 from .volpath import SimpleVolPathIntegrator, VolPathIntegrator
+from .ao import AOIntegrator
+from .aov import AOVIntegrator
+from .direct import DirectIntegrator
+from .randomwalk import RandomWalkIntegrator
+from .simplepath import SimplePathIntegrator
+from .whitted import WhittedIntegrator
 
 INTEGRATORS = {"path": PathIntegrator, "volpath": VolPathIntegrator, "volpathmis": VolPathIntegrator,
                "simplevolpath": SimpleVolPathIntegrator}
 INTEGRATORS.update(prb=PRBIntegrator, prbvolpath=PRBVolPathIntegrator)
 INTEGRATORS.update(ptracer=ParticleTracerIntegrator, lightpath=ParticleTracerIntegrator)
+INTEGRATORS.update(whitted=WhittedIntegrator, direct=DirectIntegrator, randomwalk=RandomWalkIntegrator,
+                   simplepath=SimplePathIntegrator, ambientocclusion=AOIntegrator, aov=AOVIntegrator)

@@ -1,0 +1,78 @@
+"""``randomwalk``: pbrt-v4's RandomWalkIntegrator, the simplest unbiased path tracer.
+
+At each surface the path adds the emitted radiance and continues in a direction drawn
+uniformly from the whole sphere (density 1/(4 pi)), weighted by f |cos| / pdf; there is
+no light sampling, no MIS and no Russian roulette. Delta lobes (mirrors, glass) are
+never sampled, so such surfaces show only their own emission. Rays leave the scene
+through the infinite lights. ``null`` surfaces are crossed unchanged (they count as a
+vertex, as pbrt-v4's SimplePath does).
+
+Depth: pbrt-v4's ``maxdepth`` (default 5) or Mitsuba's ``max_depth`` = ``maxdepth`` + 1
+(see :func:`pbr.integrators.base.pbrt_max_depth`). ``hide_emitters`` (Mitsuba's):
+camera rays pass through emitting surfaces and do not see the environment.
+"""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+
+from ..bsdfs.base import ShadingContext
+from .base import SamplingIntegrator, PRIMAL, pbrt_max_depth, require_no_media
+from .direct import hit_emission
+
+
+class RandomWalkIntegrator(SamplingIntegrator):
+    name = "randomwalk"
+    light_sampler = "uniform"   # no light sampling
+
+    def __init__(self, props):
+        self.max_depth = pbrt_max_depth(props)
+        self.hide_emitters = props.bool("hide_emitters", False)
+        require_no_media(props)
+        props.finish()
+
+    def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
+        if mode != PRIMAL:
+            raise NotImplementedError(f"{self.name}: gradients are not implemented (use 'path')")
+        if self.max_depth == 0:
+            return mi.Spectrum(0.0), dr.zeros(mi.Bool, dr.width(active))
+        return self._sample(scene, rng, ray, wl, active)
+
+    @dr.syntax
+    def _sample(self, scene, rng, ray, wl, active):
+        geo, lights, bsdfs = scene.geometry, scene.lights, scene.bsdfs
+        L = mi.Spectrum(0.0)
+        beta = mi.Spectrum(1.0)
+        depth = mi.UInt32(0)
+        valid = mi.Bool(False)
+        active = mi.Bool(active)
+        ray = mi.Ray3f(ray)
+        while dr.hint(active, label="randomwalk"):
+            si, shape = geo.intersect(ray, active)
+            hit = active & si.is_valid()
+            valid |= hit
+            Le, light = hit_emission(scene, si, shape, wl, hit)
+            skip = hit & (light > 0) & (depth == 0) if self.hide_emitters else mi.Bool(False)
+            L += dr.select(skip, 0.0, beta * Le)
+            if lights.has_infinite:
+                escaped = active & ~hit
+                if self.hide_emitters:
+                    escaped &= depth > 0
+                for Le_inf, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), escaped):
+                    L += dr.select(escaped, beta * Le_inf, 0.0)
+
+            go = hit & ~skip & (depth + 1 < self.max_depth)
+            bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, go)
+            null = bsdfs.is_null(bsdf_id, go)
+            wp = mi.warp.square_to_uniform_sphere(mi.Point2f(rng.next_float32(), rng.next_float32()))
+            ctx = ShadingContext(si, wl, scene.textures)
+            f = bsdfs.eval_pdf(bsdf_id, ctx, si.to_local(wp), go & ~null)[0]
+            beta[go & ~null] = beta * f * (4.0 * math.pi)
+            through = skip | null
+            ray = dr.select(through, si.spawn_ray(ray.d), si.spawn_ray(wp))
+            depth[hit & ~skip] = depth + 1
+            active = through | (go & dr.any(beta != 0.0))
+        return L, valid

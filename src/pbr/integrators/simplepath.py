@@ -1,0 +1,140 @@
+"""``simplepath``: pbrt-v4's SimplePathIntegrator, a path tracer without MIS.
+
+``samplelights`` (default true): at each vertex one light, picked uniformly, is sampled
+for direct light; emission found by a path is then counted only after a specular
+bounce (or on camera rays), so no light is counted twice. ``samplebsdf`` (default true):
+the path continues by BSDF sampling; otherwise by a uniform direction on the sphere
+(BSDFs that reflect and transmit) or on the hemisphere of the side the BSDF scatters to
+(density 1/(2 pi)), and delta lobes are never followed. All four combinations are
+valid; without ``samplelights`` delta lights (point, spot, directional) are never found.
+There is no Russian roulette. ``null`` surfaces are crossed as delta transmissions
+(they count as a vertex, as in pbrt-v4).
+
+Depth: pbrt-v4's ``maxdepth`` (default 5) or Mitsuba's ``max_depth`` = ``maxdepth`` + 1
+(see :func:`pbr.integrators.base.pbrt_max_depth`). ``hide_emitters`` (Mitsuba's):
+camera rays pass through emitting surfaces and do not see the environment.
+"""
+
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+
+from ..bsdfs.base import REFLECTION, TRANSMISSION, ShadingContext
+from ..spectrum import first_only
+from .base import SamplingIntegrator, PRIMAL, pbrt_max_depth, require_no_media
+from .direct import hit_emission
+
+# How a direction is drawn without BSDF sampling (per BSDF entry).
+HEMI_SAME, HEMI_OTHER, SPHERE = 0, 1, 2
+
+
+class SimplePathIntegrator(SamplingIntegrator):
+    name = "simplepath"
+    light_sampler = "uniform"   # pbrt-v4's SimplePath picks lights uniformly
+
+    def __init__(self, props):
+        self.max_depth = pbrt_max_depth(props)
+        self.sample_lights = props.bool("samplelights", True)
+        self.sample_bsdf = props.bool("samplebsdf", True)
+        self.hide_emitters = props.bool("hide_emitters", False)
+        require_no_media(props)
+        props.finish()
+
+    def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
+        if mode != PRIMAL:
+            raise NotImplementedError(f"{self.name}: gradients are not implemented (use 'path')")
+        if self.max_depth == 0:
+            return mi.Spectrum(0.0), dr.zeros(mi.Bool, dr.width(active))
+        uniform_kind = None
+        if not self.sample_bsdf:
+            kinds = [SPHERE if (f & REFLECTION and f & TRANSMISSION) else HEMI_OTHER if f & TRANSMISSION
+                     else HEMI_SAME for f in scene.bsdfs.entry_flags()]
+            uniform_kind = mi.UInt32(kinds)
+        return self._sample(scene, rng, ray, wl, active, uniform_kind)
+
+    @staticmethod
+    def _uniform_direction(si, wo, kind, u):
+        """(world direction, density) drawn uniformly on the sphere or on the hemisphere
+        about the geometric normal on the side ``kind`` asks for relative to ``wo``."""
+        d = mi.warp.square_to_uniform_sphere(u)
+        n = si.n
+        same = dr.dot(wo, n) * dr.dot(d, n) > 0
+        flip = ((kind == HEMI_SAME) & ~same) | ((kind == HEMI_OTHER) & same)
+        pdf = dr.select(kind == SPHERE, 0.25 / math.pi, 0.5 / math.pi)
+        return dr.select(flip, -d, d), pdf
+
+    def _next_direction(self, scene, rng, si, ctx, bsdf_id, wo, uniform_kind, specular, terminated, active):
+        """(world direction, throughput weight, specular flag, dispersion-terminated flag)
+        of the path's next segment, by BSDF sampling or uniformly."""
+        bsdfs = scene.bsdfs
+        u1 = rng.next_float32()
+        u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+        if not self.sample_bsdf:
+            kind = dr.gather(mi.UInt32, uniform_kind, bsdf_id, active)
+            wi, pdf = self._uniform_direction(si, wo, kind, u2)
+            weight = bsdfs.eval_pdf(bsdf_id, ctx, si.to_local(wi), active)[0] / pdf
+            return wi, weight, dr.select(active, False, specular), terminated
+        bs = bsdfs.sample(bsdf_id, ctx, u1, u2, active)
+        weight = dr.select(bs.pdf > 0, bs.weight, 0.0)
+        if bsdfs.dispersive:
+            # Wavelength-dependent refraction: the first wavelength stands for all.
+            term = active & bs.terminate & ~terminated
+            weight = dr.select(term, first_only(weight), weight)
+            terminated = terminated | term
+        return si.to_world(bs.wo), weight, dr.select(active, bs.delta, specular), terminated
+
+    @dr.syntax
+    def _sample(self, scene, rng, ray, wl, active, uniform_kind):
+        geo, lights, bsdfs = scene.geometry, scene.lights, scene.bsdfs
+        L = mi.Spectrum(0.0)
+        beta = mi.Spectrum(1.0)
+        depth = mi.UInt32(0)
+        specular = mi.Bool(True)
+        terminated = mi.Bool(False)
+        valid = mi.Bool(False)
+        active = mi.Bool(active)
+        ray = mi.Ray3f(ray)
+        while dr.hint(active, label="simplepath"):
+            si, shape = geo.intersect(ray, active)
+            hit = active & si.is_valid()
+            valid |= hit
+            # Emission is counted where light sampling could not have found it.
+            count = specular if self.sample_lights else mi.Bool(True)
+            Le, light = hit_emission(scene, si, shape, wl, hit)
+            skip = hit & (light > 0) & (depth == 0) if self.hide_emitters else mi.Bool(False)
+            L += dr.select(count & ~skip, beta * Le, 0.0)
+            if lights.has_infinite:
+                escaped = active & ~hit & count
+                if self.hide_emitters:
+                    escaped &= depth > 0
+                for Le_inf, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), escaped):
+                    L += dr.select(escaped, beta * Le_inf, 0.0)
+
+            go = hit & ~skip & (depth + 1 < self.max_depth)
+            bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, go)
+            null = bsdfs.is_null(bsdf_id, go)
+            scatter = go & ~null
+            ctx = ShadingContext(si, wl, scene.textures)
+
+            if self.sample_lights:
+                u_light = rng.next_float32()
+                u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
+                lit = scatter & bsdfs.smooth(bsdf_id, scatter)
+                ls = lights.sample_Li(si, u_light, u_pos, wl, lit)
+                em = lit & (ls.pdf > 0)
+                em &= geo.unoccluded(si, ls.p, em)
+                f_em = bsdfs.eval_pdf(bsdf_id, ctx, si.to_local(ls.wi), em)[0]
+                L += dr.select(em, beta * f_em * ls.L / ls.pdf, 0.0)
+
+            wi, weight, specular, terminated = self._next_direction(
+                scene, rng, si, ctx, bsdf_id, -ray.d, uniform_kind, specular, terminated, scatter)
+            beta[scatter] = beta * weight
+            specular |= null | skip
+            through = skip | null
+            ray = dr.select(through, si.spawn_ray(ray.d), si.spawn_ray(wi))
+            depth[hit & ~skip] = depth + 1
+            active = through | (scatter & dr.any(beta != 0.0))
+        return L, valid

@@ -1,0 +1,169 @@
+"""``whitted``: recursive ray tracing after Whitted (pbrt-v3's WhittedIntegrator).
+
+At every surface a ray reaches: the radiance it emits, plus direct light from *every*
+light with one shadow-ray sample each (area lights sampled by area, no MIS, no light
+sampler), plus the radiance arriving along the *specular* (delta) directions, traced
+recursively. At a surface with both a reflected and a transmitted delta lobe
+(``dielectric``, ``thindielectric``) both branches are followed, each weighted by its
+Fresnel factor, not chosen at random; smooth lobes receive direct light only (no
+indirect diffuse or glossy light).
+
+The specular lobes of a BSDF are found through its sampling routine: the lobe chosen
+by the lobe-selection number u = 0 and the one chosen by u -> 1 (the same lobe is
+followed once). A delta sample carries ``weight = f / p`` and the discrete probability
+``pdf = p`` of its lobe, so ``weight * pdf`` is the lobe's Fresnel factor. This covers
+every BSDF with at most two delta lobes (conductor, dielectric, thindielectric, plastic's
+coating, null, masks); a ``blendbsdf`` of two specular BSDFs follows only the reflected
+lobe of one and the transmitted lobe of the other.
+
+Vectorised as a wavefront over depth levels: each level is one array of rays with a
+throughput, shaded in one kernel; the rays its specular branches spawn are compacted
+(``dr.compress``) into the next level's array, and each ray's radiance is scatter-added
+to its camera sample's slot. Every ray draws its random numbers from its own stream,
+keyed by its camera sample and its place in the ray tree.
+
+``max_depth`` has Mitsuba's meaning (path segments, counting the camera ray): light
+emitted at the end of k specular bounces counts when k + 1 <= max_depth, direct light
+there when k + 2 <= max_depth; the default 5 allows 3 specular bounces before direct
+lighting. It must be finite: each dielectric hit doubles the rays.
+``hide_emitters``: camera rays pass through emitting surfaces and do not see the
+environment (as Mitsuba).
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from ..bsdfs.base import ShadingContext
+from ..samplers import IndependentSampler
+from ..spectrum import N_WAVELENGTHS, SampledWavelengths, first_only
+from .base import SamplingIntegrator, PRIMAL, require_no_media
+from .direct import hit_emission, intersect_camera_ray
+
+
+class WhittedIntegrator(SamplingIntegrator):
+    name = "whitted"
+    light_sampler = "uniform"   # unused: every light is sampled
+    # Lobe-selection numbers of the branches: the first lobe and the last one.
+    branch_u = (0.0, 1.0 - 2.0 ** -24)
+
+    def __init__(self, props):
+        self.max_depth = props.int("max_depth", 5)
+        if self.max_depth < 0:
+            raise props.error("max_depth", f"must be >= 0 (whitted branches at every specular hit, so the "
+                                           f"depth must be finite), got {self.max_depth}")
+        self.hide_emitters = props.bool("hide_emitters", False)
+        require_no_media(props)
+        props.finish()
+
+    def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
+        if mode != PRIMAL:
+            raise NotImplementedError("whitted: gradients are not implemented (use 'path')")
+        n = dr.width(active)
+        if self.max_depth == 0:
+            return mi.Spectrum(0.0), dr.zeros(mi.Bool, n)
+        acc = dr.zeros(mi.Float, N_WAVELENGTHS * n)
+        key = rng.next_uint32()
+        dr.eval(key, wl)
+        slot = dr.arange(mi.UInt32, n)
+        code = dr.zeros(mi.UInt32, n)
+        beta = dr.full(mi.Spectrum, 1.0, n)
+        single = dr.zeros(mi.Bool, n)   # only the first wavelength goes on (dispersion)
+        ray = mi.Ray3f(ray)
+        valid = None
+        for depth in range(self.max_depth):
+            if depth > 0:
+                rng = IndependentSampler.make_rng(code, dr.gather(mi.UInt32, key, slot))
+                wl_k = SampledWavelengths(dr.gather(mi.Spectrum, wl.lambda_, slot),
+                                          dr.gather(mi.Spectrum, wl.pdf, slot))
+            else:
+                wl_k = wl
+            L, hit, branches = self._shade(scene, rng, ray, wl_k, beta, single, depth, active)
+            for c in range(N_WAVELENGTHS):
+                dr.scatter_reduce(dr.ReduceOp.Add, acc, L[c], slot * N_WAVELENGTHS + c, active)
+            if depth == 0:
+                valid = hit
+            if branches is None:
+                break
+            dr.eval(acc, valid, branches)
+            ray, beta, single, slot, code, active = self._compact(branches, slot, code)
+            if active is None:
+                break
+        idx = dr.arange(mi.UInt32, n) * N_WAVELENGTHS
+        L = mi.Spectrum(*[dr.gather(mi.Float, acc, idx + c) for c in range(N_WAVELENGTHS)])
+        return L, valid
+
+    @staticmethod
+    def _compact(branches, slot, code):
+        """The next level's rays: the followed branches of this level's rays, packed.
+        Returns (ray, beta, single, slot, code, active), active = None when no ray is left."""
+        nb, m = len(branches), dr.width(branches[0][2])
+
+        def pick(tp, i, which, parent):
+            v = dr.gather(tp, branches[0][i], parent)
+            for b in range(1, nb):
+                v = dr.select(which == b, dr.gather(tp, branches[b][i], parent), v)
+            return v
+        j = dr.arange(mi.UInt32, nb * m)
+        idx = dr.compress(pick(mi.Bool, 2, j // m, j % m))
+        k = dr.width(idx)
+        if k == 0:
+            return (None,) * 6
+        which, parent = idx // m, idx % m
+        ray = mi.Ray3f(pick(mi.Point3f, 0, which, parent), pick(mi.Vector3f, 1, which, parent))
+        # Ray-tree codes: the children of node c are nb c + 1 + b (0: the camera ray).
+        child_code = dr.gather(mi.UInt32, code, parent) * nb + 1 + which
+        return (ray, pick(mi.Spectrum, 3, which, parent), pick(mi.Bool, 4, which, parent),
+                dr.gather(mi.UInt32, slot, parent), child_code, dr.full(mi.Bool, True, k))
+
+    @dr.syntax
+    def _shade(self, scene, rng, ray, wl, beta, single, depth: int, active):
+        """One level: (radiance toward the rays times their throughput, hit mask, the two
+        specular branches as (origin, direction, followed, throughput, single-wavelength
+        flag), or None at the last level)."""
+        geo, lights, bsdfs = scene.geometry, scene.lights, scene.bsdfs
+        hidden = self.hide_emitters and depth == 0
+        si, shape = intersect_camera_ray(scene, ray, active, hidden)
+        hit = active & si.is_valid()
+        L = mi.Spectrum(0.0)
+        if not hidden:
+            L += hit_emission(scene, si, shape, wl, hit)[0]
+            if lights.has_infinite:
+                for Le_inf, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), active & ~hit):
+                    L += Le_inf
+        branches = None
+        if depth + 2 <= self.max_depth:
+            ctx = ShadingContext(si, wl, scene.textures)
+            bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
+
+            # Direct light: one sample of every light.
+            smooth = hit & bsdfs.smooth(bsdf_id, hit)
+            k = dr.zeros(mi.UInt32, dr.width(smooth))
+            while dr.hint(smooth & (k < lights.n_lights), label="whitted_lights"):
+                u = mi.Point2f(rng.next_float32(), rng.next_float32())
+                ls = lights.sample_Li_light(k, si, u, wl, smooth)
+                em = smooth & (ls.pdf > 0)
+                em &= geo.unoccluded(si, ls.p, em)
+                f = bsdfs.eval_pdf(bsdf_id, ctx, si.to_local(ls.wi), em)[0]
+                L += dr.select(em, f * ls.L / ls.pdf, 0.0)
+                k += 1
+
+            # The specular branches, each weighted by its lobe's Fresnel factor.
+            u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+            branches = []
+            for u1 in self.branch_u:
+                bs = bsdfs.sample(bsdf_id, ctx, mi.Float(u1), u2, hit)
+                follow = hit & bs.delta & (bs.pdf > 0) & dr.any(bs.weight != 0)
+                if len(branches) > 0:
+                    follow &= ~(branches[0][2] & dr.all(bs.wo == branches[0][5]))
+                w = beta * bs.weight * bs.pdf
+                single_b = mi.Bool(single)
+                if bsdfs.dispersive:
+                    term = bs.terminate & ~single
+                    w = dr.select(term, first_only(w), w)
+                    single_b |= term
+                r = si.spawn_ray(si.to_world(bs.wo))
+                branches.append((r.o, r.d, follow, w, single_b, bs.wo))
+            branches = [b[:5] for b in branches]
+        return beta * L, hit, branches
