@@ -11,6 +11,7 @@ from .direct import DirectIntegrator
 from .randomwalk import RandomWalkIntegrator
 from .simplepath import SimplePathIntegrator
 from .whitted import WhittedIntegrator
+from .sppm import SPPMIntegrator
 
 INTEGRATORS = {"path": PathIntegrator, "volpath": VolPathIntegrator, "volpathmis": VolPathIntegrator,
                "simplevolpath": SimpleVolPathIntegrator}
@@ -18,3 +19,4 @@ INTEGRATORS.update(prb=PRBIntegrator, prbvolpath=PRBVolPathIntegrator)
 INTEGRATORS.update(ptracer=ParticleTracerIntegrator, lightpath=ParticleTracerIntegrator)
 INTEGRATORS.update(whitted=WhittedIntegrator, direct=DirectIntegrator, randomwalk=RandomWalkIntegrator,
                    simplepath=SimplePathIntegrator, ambientocclusion=AOIntegrator, aov=AOVIntegrator)
+INTEGRATORS.update(sppm=SPPMIntegrator)
