@@ -12,6 +12,7 @@ from .randomwalk import RandomWalkIntegrator
 from .simplepath import SimplePathIntegrator
 from .whitted import WhittedIntegrator
 from .sppm import SPPMIntegrator
+from .radiosity import RadiosityIntegrator
 
 INTEGRATORS = {"path": PathIntegrator, "volpath": VolPathIntegrator, "volpathmis": VolPathIntegrator,
                "simplevolpath": SimpleVolPathIntegrator}
@@ -20,3 +21,4 @@ INTEGRATORS.update(ptracer=ParticleTracerIntegrator, lightpath=ParticleTracerInt
 INTEGRATORS.update(whitted=WhittedIntegrator, direct=DirectIntegrator, randomwalk=RandomWalkIntegrator,
                    simplepath=SimplePathIntegrator, ambientocclusion=AOIntegrator, aov=AOVIntegrator)
 INTEGRATORS.update(sppm=SPPMIntegrator)
+INTEGRATORS.update(radiosity=RadiosityIntegrator)

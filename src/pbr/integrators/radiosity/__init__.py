@@ -1,0 +1,213 @@
+"""``radiosity``: the finite-element solution of diffuse global illumination.
+
+The scene's mesh triangles (subdivided to at most ``max_area``) are patches of constant
+exitant radiance; each gets one spectrum on ``wavelength_bins`` bins (:mod:`.bins`). The
+system L = Le + rho F L is solved once per scene by one of four solvers (:mod:`.solvers`)
+with form factors from ray casting (:mod:`.formfactors`), cached on the integrator, and
+then viewed from any camera: a camera ray's first hit looks up its patch (flat) or the
+barycentric blend of the patch's vertex values (``smooth``). The rendered radiance at a
+hit is
+
+    L(x, l) = Le(x, l) + rho(x, l) H(l),
+
+with the emission and reflectance evaluated exactly at the hit and the wavelengths the
+film sampled, and only the gathered incident radiance ``H`` (irradiance / pi) taken from
+the solution (interpolated between bin centres). So textures keep their detail and a
+directly seen emitter its exact spectrum; for constant materials it is exactly the
+patch solution. Filters and ``spp`` work as for ``path``.
+
+Scenes: every shape a triangle mesh, every BSDF a plain one-sided ``diffuse``, every
+emitter ``area`` (one-sided), no media; anything else is a SceneError naming its key.
+Units: radiance as the rest of pbr; radiosity B = pi L.
+"""
+
+from __future__ import annotations
+
+import time
+import weakref
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ...bsdfs.base import ShadingContext
+from ...scene.props import SceneError
+from ..base import SamplingIntegrator, PRIMAL
+from . import solvers
+from .bins import WavelengthBins
+from .energy import energy_balance
+from .export import export_mesh, vertex_colors, vertex_values
+from .formfactors import form_factor_column, form_factor_matrix, shoot
+from .patches import Patches, check_materials
+
+SOLVERS = ("gauss_seidel", "jacobi", "progressive", "stochastic_jacobi")
+MAX_DENSE_PATCHES = 16384   # the dense matrix of the Jacobi and Gauss-Seidel solvers: 1 GiB
+
+
+class RadiositySolution:
+    """A solved scene: ``patches``, ``bins``, and per patch and bin (N, K) arrays ``Le``
+    (emitted radiance), ``rho`` (reflectance), ``H`` (gathered incident radiance) and
+    ``L = Le + rho H`` (exitant radiance); ``F`` the dense form factors (dense solvers
+    only) and ``stats`` (:class:`.solvers.SolveStats`)."""
+
+    def __init__(self, patches, bins, Le, rho, L, H, stats, F=None, geometry=None, setup_seconds=0.0):
+        self.patches, self.bins = patches, bins
+        self.Le, self.rho, self.L, self.H = Le, rho, L, H
+        self.stats, self.F, self.geometry = stats, F, geometry
+        self.setup_seconds = setup_seconds
+        self._tables = {}
+
+    @property
+    def radiosity(self) -> np.ndarray:
+        """B = pi L per patch and bin."""
+        return np.pi * self.L
+
+    def rgb(self) -> np.ndarray:
+        """(N, 3) linear sRGB of each patch's exitant radiance."""
+        return self.bins.to_srgb(self.L)
+
+    def vertex_values(self, values=None) -> np.ndarray:
+        return vertex_values(self.patches, self.L if values is None else values)
+
+    def vertex_colors(self, space: str = "linear") -> np.ndarray:
+        return vertex_colors(self, space)
+
+    def export(self, path: str, space: str = "srgb", exposure: float = 0.0):
+        """Write the subdivided meshes with vertex colours (PLY, GLB, ... by extension)."""
+        return export_mesh(self, path, space, exposure)
+
+    def energy_balance(self, rays_per_patch: int = 256, seed: int = 1, batches: int = 8):
+        return energy_balance(self, self.geometry, rays_per_patch, seed, batches)
+
+    def table(self, smooth: bool) -> mi.Float:
+        """``H`` per patch (flat) or per vertex (smooth), flattened for :meth:`bins.lookup`."""
+        if smooth not in self._tables:
+            H = self.vertex_values(self.H) if smooth else self.H
+            self._tables[smooth] = mi.Float(np.ascontiguousarray(H, np.float32).ravel())
+        return self._tables[smooth]
+
+
+def _form_factor_bar(progress, n):
+    """A tqdm bar (fraction of receivers) for the dense matrix of large scenes."""
+    if progress is not None or n < 2048:
+        return None
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:  # pragma: no cover
+        return None
+    return tqdm(total=1.0, desc="radiosity form factors", leave=False, bar_format="{l_bar}{bar}| {elapsed}")
+
+
+def _key_paths(loader):
+    """Key paths of the shapes and of the emitters, in the order the loader adds them."""
+    if loader is None:
+        return None, None
+    from ...geometry import SHAPE_PARAMS
+    from ...scene.loader import EMITTER_LIKE
+    shapes, emitters = [], []
+    for key, v in loader.d.items():
+        if not isinstance(v, dict):
+            continue
+        t = v.get("type")
+        if t in SHAPE_PARAMS:
+            shapes.append(f"scene.{key}")
+            emitters += [f"scene.{key}.{k}" for k, c in v.items()
+                         if isinstance(c, dict) and c.get("type") in EMITTER_LIKE]
+        elif t in EMITTER_LIKE:
+            emitters.append(f"scene.{key}")
+    return shapes, emitters
+
+
+class RadiosityIntegrator(SamplingIntegrator):
+    name = "radiosity"
+
+    def __init__(self, props):
+        self.solver = props.string("solver", "gauss_seidel", choices=SOLVERS)
+        self.max_area = props.float("max_area", 0.0, min=0.0)
+        self.wavelength_bins = props.int("wavelength_bins", 32, min=4)
+        self.max_iterations = props.int("max_iterations", 10000, min=1)
+        self.tolerance = props.float("tolerance", 1e-4, min=0.0)
+        self.form_factor_samples = props.int("form_factor_samples", 16, min=1)
+        self.rays_per_iteration = props.int("rays_per_iteration", 1 << 20, min=1)
+        self.smooth = props.bool("smooth", False)
+        self.seed = props.int("seed", 0, min=0)
+        props.finish()
+        self._path = props.path
+        self._shape_paths, self._emitter_paths = _key_paths(props.loader)
+        self._scene = None
+        self._solution = None
+
+    # -- the solution -------------------------------------------------------------------
+    @property
+    def solution(self) -> RadiositySolution | None:
+        """The cached solution (None before the first solve)."""
+        return self._solution
+
+    def solve(self, scene, force: bool = False, progress=None) -> RadiositySolution:
+        """Solve ``scene`` (once: cached until ``force`` or another scene). ``progress``:
+        None (a tqdm bar), False, or ``fn(solver, iteration, residual)``."""
+        if not force and self._solution is not None and self._scene is not None and self._scene() is scene:
+            return self._solution
+        with dr.suspend_grad():
+            sol = self._solve(scene, progress)
+        self._scene, self._solution = weakref.ref(scene), sol
+        return sol
+
+    def _solve(self, scene, progress):
+        t0 = time.perf_counter()
+        paths = self._shape_paths if self._shape_paths and len(self._shape_paths) == len(scene.shape_ids) else None
+        check_materials(scene, paths, self._emitter_paths)
+        patches = Patches(scene, self.max_area, paths)
+        bins = WavelengthBins(self.wavelength_bins)
+        Le, rho = patches.spectra(scene, bins)
+        geo = scene.geometry
+        setup = time.perf_counter() - t0
+        args = (Le, rho, patches.area, self.tolerance, self.max_iterations)
+        S, seed, F = self.form_factor_samples, self.seed, None
+        if self.solver in ("jacobi", "gauss_seidel"):
+            if patches.count > MAX_DENSE_PATCHES:
+                raise SceneError(f"{self._path}.max_area: {patches.count} patches exceed the {MAX_DENSE_PATCHES} "
+                                 f"of the dense solvers; use solver 'progressive' or 'stochastic_jacobi', "
+                                 f"or a larger max_area")
+            t1 = time.perf_counter()
+            bar = _form_factor_bar(progress, patches.count)
+            F = form_factor_matrix(patches, geo, S, seed, bar and (lambda f: bar.update(f - bar.n)))
+            if bar:
+                bar.close()
+            t_ff = time.perf_counter() - t1
+            L, H, st = getattr(solvers, self.solver)(F, *args, progress=progress)
+            st.form_factor_seconds = t_ff
+        elif self.solver == "progressive":
+            L, H, st = solvers.progressive(lambda j: form_factor_column(patches, geo, j, S, seed), *args,
+                                           progress=progress)
+        else:
+            L, H, st = solvers.stochastic_jacobi(lambda src, s: shoot(patches, geo, src, s), Le, rho, patches.area,
+                                                 self.rays_per_iteration, self.tolerance, self.max_iterations,
+                                                 seed=seed, progress=progress)
+        return RadiositySolution(patches, bins, Le, rho, L, H, st, F, geo, setup)
+
+    # -- rendering ----------------------------------------------------------------------
+    def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
+        self.solve(scene, progress=progress)
+        return super().render(scene, sensor=sensor, seed=seed, spp=spp, progress=progress)
+
+    def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
+        if mode != PRIMAL:
+            raise NotImplementedError("radiosity: the solution is not differentiable (primal renders only)")
+        sol = self.solve(scene)
+        si, shape = scene.geometry.intersect(ray, active)
+        hit = active & si.is_valid()
+        patch, w = sol.patches.patch_of_hit(shape, si.prim_index, si.p, hit)
+        table = sol.table(self.smooth)
+        if self.smooth:
+            H = mi.Spectrum(0.0)
+            for k in range(3):
+                v = dr.gather(mi.UInt32, sol.patches.dr_faces[k], patch, hit)
+                H += w[k] * sol.bins.lookup(table, v, wl.lambda_, hit)
+        else:
+            H = sol.bins.lookup(table, patch, wl.lambda_, hit)
+        bsdf = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
+        f, _ = scene.bsdfs.eval_pdf(bsdf, ShadingContext(si, wl, scene.textures), mi.Vector3f(0, 0, 1), hit)
+        light = scene.lights.light_of_hit(scene, shape, si, hit)
+        Le = scene.lights.L(light - 1, si, wl, hit & (light > 0))
+        return dr.select(hit, Le + f * dr.pi * H, 0.0), hit
