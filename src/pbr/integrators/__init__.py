@@ -13,6 +13,7 @@ from .simplepath import SimplePathIntegrator
 from .whitted import WhittedIntegrator
 from .sppm import SPPMIntegrator
 from .radiosity import RadiosityIntegrator
+from .bdpt import BDPTIntegrator
 
 INTEGRATORS = {"path": PathIntegrator, "volpath": VolPathIntegrator, "volpathmis": VolPathIntegrator,
                "simplevolpath": SimpleVolPathIntegrator}
@@ -22,3 +23,4 @@ INTEGRATORS.update(whitted=WhittedIntegrator, direct=DirectIntegrator, randomwal
                    simplepath=SimplePathIntegrator, ambientocclusion=AOIntegrator, aov=AOVIntegrator)
 INTEGRATORS.update(sppm=SPPMIntegrator)
 INTEGRATORS.update(radiosity=RadiosityIntegrator)
+INTEGRATORS.update(bdpt=BDPTIntegrator)
