@@ -20,6 +20,7 @@ import numpy as np
 
 from .. import spectrum as spec
 from ..samplers import IndependentSampler
+from ..sampling import power_heuristic
 from ..spectrum import SampledWavelengths
 
 PRIMAL, FORWARD, BACKWARD = "primal", "forward", "backward"
@@ -150,6 +151,23 @@ class SamplingIntegrator:
                 _, _, _, weight, _ = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
                 sum_w += _pixel_sums(None, weight, w * h, per_pass)[1]
         return np.maximum(sum_w, 1e-30)
+
+
+def emitted_mis(scene, light, si, d, wl, on_light, escaped, prev_p, prev_n, prev_pdf, prev_delta):
+    """Radiance a path finds by BSDF (or phase) sampling: the area light ``light - 1``
+    at ``si`` on ``on_light`` lanes, the infinite lights along ``d`` on ``escaped`` lanes,
+    each weighted by the power heuristic against light sampling from the previous vertex
+    (weight 1 after a delta vertex). Throughput not included."""
+    lights = scene.lights
+    Le = lights.L(light - 1, si, wl, on_light)
+    pdf_light = lights.pdf_Li(light - 1, prev_p, prev_n, si, on_light & ~prev_delta)
+    w_hit = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_light))
+    Le = dr.select(on_light, Le * w_hit, 0.0)
+    if lights.has_infinite:
+        for Le_inf, pdf_inf in lights.Le_escaped(d, wl, prev_p, prev_n, escaped):
+            w_inf = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_inf))
+            Le += dr.select(escaped, Le_inf * w_inf, 0.0)
+    return Le
 
 
 def forward_derivative(Lo) -> mi.Spectrum:

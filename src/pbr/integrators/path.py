@@ -21,7 +21,7 @@ from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
 from ..spectrum import first_only
-from .base import SamplingIntegrator, PRIMAL, BACKWARD, forward_derivative
+from .base import SamplingIntegrator, PRIMAL, BACKWARD, emitted_mis, forward_derivative
 
 
 class PathIntegrator(SamplingIntegrator):
@@ -72,19 +72,13 @@ class PathIntegrator(SamplingIntegrator):
             # hide_emitters (Mitsuba's meaning): camera rays pass through area lights.
             skip = on_light & (depth == 0) if self.hide_emitters else mi.Bool(False)
             on_light &= ~skip
+            # Rays leaving the scene see the infinite lights (MIS against NEE).
+            escaped = active & ~si.is_valid()
+            if self.hide_emitters:
+                escaped &= depth > 0
             with dr.resume_grad(when=not primal):
-                Le = lights.L(light - 1, si, wl, on_light)
-                pdf_light = lights.pdf_Li(light - 1, prev_p, prev_n, si, on_light & ~prev_delta)
-                w_hit = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_light))
-                Le = dr.select(on_light, beta * Le * w_hit, 0.0)
-                if lights.has_infinite:
-                    # Rays leaving the scene see the infinite lights (MIS against NEE).
-                    escaped = active & ~si.is_valid()
-                    if self.hide_emitters:
-                        escaped &= depth > 0
-                    for Le_inf, pdf_inf in lights.Le_escaped(ray.d, wl, prev_p, prev_n, escaped):
-                        w_inf = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_inf))
-                        Le += dr.select(escaped, beta * Le_inf * w_inf, 0.0)
+                Le = beta * emitted_mis(scene, light, si, ray.d, wl, on_light, escaped,
+                                        prev_p, prev_n, prev_pdf, prev_delta)
 
             active_next = hit & ~skip & (depth + 1 < max_depth)
             ctx = ShadingContext(si, wl, tex)

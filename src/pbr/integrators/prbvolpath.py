@@ -36,7 +36,7 @@ from ..media import majorant
 from ..sampling import power_heuristic
 from ..scene.props import SceneError
 from ..spectrum import first_only
-from .base import PRIMAL, BACKWARD, forward_derivative
+from .base import PRIMAL, BACKWARD, emitted_mis, forward_derivative
 from .volpath import SHADOW_EPSILON, VolPathIntegrator, _MediumAware
 
 
@@ -96,7 +96,7 @@ class PRBVolPathIntegrator(_MediumAware):
         exact in homogeneous media, ratio tracking in grids. In the adjoint modes, the
         derivative of ``adj * T`` (adj: the detached contribution this T multiplies) is
         propagated factor by factor (``dL``: the adjoint radiance). Returns (T, dL_fwd)."""
-        geo, media, bsdfs = scene.geometry, scene.media, scene.bsdfs
+        geo, media = scene.geometry, scene.media
         primal = mode == PRIMAL
         T = mi.Spectrum(1.0)
         going = mi.Bool(active)
@@ -142,13 +142,8 @@ class PRBVolPathIntegrator(_MediumAware):
                     inner &= ~done & (dr.max(T) > 0)
                 t0 = T_acc[0]
                 T[grid] = T * dr.select(t0 > 0, T_acc * dr.rcp(t0), 0.0)
-            bid = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
-            passable = hit & bsdfs.is_null(bid, hit)
+            passable, med, ray = VolPathIntegrator._cross_null(scene, shape, si, ray, p_light, med, hit)
             T[hit & ~passable] = mi.Spectrum(0.0)
-            med = VolPathIntegrator._enter(scene, shape, si, ray.d, med, passable)
-            nxt = si.spawn_ray(dr.normalize(p_light - si.p))
-            nxt.d = dr.normalize(p_light - nxt.o)
-            ray = dr.select(passable, nxt, ray)
             going &= passable & (dr.max(T) > 0)
         return T, dL_fwd
 
@@ -230,18 +225,12 @@ class PRBVolPathIntegrator(_MediumAware):
             on_light = surf & (light > 0)
             skip = on_light & (depth == 0) if self.hide_emitters else mi.Bool(False)
             on_light &= ~skip
+            escaped = active & ~scattered & ~hit & (dr.max(beta) > 0)
+            if self.hide_emitters:
+                escaped &= depth > 0
             with dr.resume_grad(when=not primal):
-                Le = lights.L(light - 1, si, wl, on_light)
-                pdf_light = lights.pdf_Li(light - 1, prev_p, prev_n, si, on_light & ~prev_delta)
-                w_hit = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_light))
-                Le = dr.select(on_light, beta * Le * w_hit, 0.0)
-                if lights.has_infinite:
-                    escaped = active & ~scattered & ~hit & (dr.max(beta) > 0)
-                    if self.hide_emitters:
-                        escaped &= depth > 0
-                    for Le_inf, pdf_inf in lights.Le_escaped(ray.d, wl, prev_p, prev_n, escaped):
-                        w_inf = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_inf))
-                        Le += dr.select(escaped, beta * Le_inf * w_inf, 0.0)
+                Le = beta * emitted_mis(scene, light, si, ray.d, wl, on_light, escaped,
+                                        prev_p, prev_n, prev_pdf, prev_delta)
             if primal:
                 L = L + Le
             else:

@@ -52,7 +52,7 @@ from ..samplers import IndependentSampler
 from ..sampling import power_heuristic
 from ..scene.props import SceneError
 from ..spectrum import SampledWavelengths, first_only
-from .base import SamplingIntegrator, _progress
+from .base import SamplingIntegrator, _progress, emitted_mis
 from .lightpath import check_light_paths, sample_importance, shading_correction, start_light_path
 
 UNLIMITED = 0xFFFFFFF0
@@ -304,17 +304,11 @@ class SPPMIntegrator(SamplingIntegrator):
             on_light = hit & (light > 0)
             skip = on_light & (depth == 0) if self.hide_emitters else mi.Bool(False)
             on_light &= ~skip
-            Le = lights.L(light - 1, si, wl, on_light)
-            pdf_light = lights.pdf_Li(light - 1, prev_p, prev_n, si, on_light & ~prev_delta)
-            w_hit = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_light))
-            Le = dr.select(on_light, beta * Le * w_hit, 0.0)
-            if lights.has_infinite:
-                escaped = active & ~si.is_valid()
-                if self.hide_emitters:
-                    escaped &= depth > 0
-                for Le_inf, pdf_inf in lights.Le_escaped(ray.d, wl, prev_p, prev_n, escaped):
-                    w_inf = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_inf))
-                    Le += dr.select(escaped, beta * Le_inf * w_inf, 0.0)
+            escaped = active & ~si.is_valid()
+            if self.hide_emitters:
+                escaped &= depth > 0
+            Le = beta * emitted_mis(scene, light, si, ray.d, wl, on_light, escaped,
+                                    prev_p, prev_n, prev_pdf, prev_delta)
 
             # Vertex v = depth + 1: direct light needs v <= bounces; after the visible
             # point only the emission found by its BSDF sample is still added.

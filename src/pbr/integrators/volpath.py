@@ -98,6 +98,19 @@ class VolPathIntegrator(_MediumAware):
         outside = dr.gather(mi.UInt32, scene.shape_exterior, shape, trans)
         return dr.select(trans, dr.select(dr.dot(d, si.n) > 0, outside, inside), medium)
 
+    @staticmethod
+    def _cross_null(scene, shape, si, ray, p_light, medium, hit):
+        """A shadow ray toward ``p_light`` meets surface ``si``: (lanes that pass it,
+        being ``null`` surfaces, the medium beyond, the ray continuing behind it)."""
+        bid = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
+        passable = hit & scene.bsdfs.is_null(bid, hit)
+        medium = VolPathIntegrator._enter(scene, shape, si, ray.d, medium, passable)
+        # Re-aim at the light: the offset origin of a spawned ray is displaced along
+        # the surface normal, and the drift would otherwise make the ray miss p_light.
+        nxt = si.spawn_ray(dr.normalize(p_light - si.p))
+        nxt.d = dr.normalize(p_light - nxt.o)
+        return passable, medium, dr.select(passable, nxt, ray)
+
     def _count_null(self, n_null, null):
         """Count the null collisions ``null`` of each path; (new count, lanes that reach
         ``max_null``), the latter also added to the :attr:`capped` tally."""
@@ -110,7 +123,7 @@ class VolPathIntegrator(_MediumAware):
     def _transmittance(self, scene, rng, ray, p_light, medium, wl, active):
         """Ratio-tracking transmittance from ``ray.o`` to ``p_light`` through media and
         null surfaces: (T_ray, r_u, r_l) with pbrt-v4's rescaled probabilities."""
-        geo, media, bsdfs = scene.geometry, scene.media, scene.bsdfs
+        geo, media = scene.geometry, scene.media
         T_ray = mi.Spectrum(1.0)
         r_u = mi.Spectrum(1.0)
         r_l = mi.Spectrum(1.0)
@@ -154,15 +167,8 @@ class VolPathIntegrator(_MediumAware):
                 T_ray[in_m] = T_ray * f
                 r_l[in_m] = r_l * f
                 r_u[in_m] = r_u * f
-            bid = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
-            passable = hit & bsdfs.is_null(bid, hit)
+            passable, med, ray = self._cross_null(scene, shape, si, ray, p_light, med, hit)
             T_ray[hit & ~passable] = mi.Spectrum(0.0)
-            med = self._enter(scene, shape, si, ray.d, med, passable)
-            # Re-aim at the light: the offset origin of a spawned ray is displaced along
-            # the surface normal, and the drift would otherwise make the ray miss p_light.
-            nxt = si.spawn_ray(dr.normalize(p_light - si.p))
-            nxt.d = dr.normalize(p_light - nxt.o)
-            ray = dr.select(passable, nxt, ray)
             going &= passable & (dr.max(T_ray) > 0)
         return T_ray, r_u, r_l
 
