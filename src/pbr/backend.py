@@ -169,3 +169,72 @@ class VariantStruct(type):
     @property
     def DRJIT_STRUCT(cls):
         return {k: (getattr(mi, v) if isinstance(v, str) else v) for k, v in cls._fields.items()}
+
+
+def own_table_memory(root) -> int:
+    """Give every table reachable from ``root`` memory allocated by Dr.Jit.
+
+    On the LLVM backend a Dr.Jit array built from a NumPy array maps NumPy's buffer
+    without a copy. NumPy aligns to 16 bytes, Dr.Jit's kernels to 64: a mapped input is
+    compiled as an unaligned load, and since the alignment of a fresh NumPy buffer varies,
+    rebuilding the tables (``params.update()``) changed kernel source and forced a
+    recompile of every kernel at every optimisation step. Copying such arrays into a
+    64-byte aligned buffer (a memcpy, no kernel) makes the kernels' source stable.
+
+    Walks pbr objects, lists, tuples and dicts; replaces evaluated, detached arrays whose
+    data is not 64-byte aligned. Values owned by the user (``ParamOwner.params``) are left
+    alone. Returns the number of arrays copied."""
+    if get_backend() != "llvm":
+        return 0
+    import numpy as np
+    seen, count = set(), [0]
+
+    def fix(x):
+        if x is None or isinstance(x, (bool, int, float, str, bytes)):
+            return x
+        if dr.is_tensor_v(x):
+            a = fix(x.array)
+            return x if a is x.array else type(x)(a, x.shape)
+        if dr.is_array_v(x):
+            if dr.depth_v(x) > 1:
+                for i in range(len(x)):
+                    c = fix(x[i])
+                    if c is not x[i]:
+                        x[i] = c
+                return x
+            if x.state != dr.VarState.Evaluated or dr.grad_enabled(x):
+                return x
+            data = np.asarray(x)                 # a view of the array's memory
+            if data.ctypes.data % 64 == 0:
+                return x
+            # An aligned NumPy buffer, mapped in turn (Dr.Jit keeps it alive).
+            raw = np.empty(data.nbytes + 64, np.uint8)
+            start = -raw.ctypes.data % 64
+            aligned = raw[start:start + data.nbytes].view(data.dtype)
+            aligned[:] = data
+            count[0] += 1
+            return type(x)(aligned)
+        if id(x) in seen:
+            return x
+        if isinstance(x, list):
+            seen.add(id(x))
+            for i, v in enumerate(x):
+                x[i] = fix(v)
+        elif isinstance(x, tuple):
+            return type(x)(*map(fix, x)) if hasattr(x, "_fields") else tuple(map(fix, x))
+        elif isinstance(x, dict):
+            seen.add(id(x))
+            for k, v in x.items():
+                x[k] = fix(v)
+        elif type(x).__module__.startswith("pbr") and hasattr(x, "__dict__"):
+            seen.add(id(x))
+            user = "params" if any(c.__name__ == "ParamOwner" for c in type(x).__mro__) else None
+            for k, v in vars(x).items():
+                if k != user:
+                    c = fix(v)
+                    if c is not v:
+                        setattr(x, k, c)
+        return x
+
+    fix(root)
+    return count[0]

@@ -74,9 +74,7 @@ class SamplingIntegrator:
         per-sample ``mi.Float`` (AOVs): they are developed with the same filter weights
         and appended after R, G, B, giving an (H, W, 3 + len(channels)) tensor."""
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
-        sum_xyz = np.zeros((w * h, 3))
-        sum_w = np.zeros(w * h)
-        sum_extra = None
+        sums = None
         bar = _progress(n_pass, progress)
         for p in range(n_pass):
             with dr.suspend_grad():
@@ -86,20 +84,15 @@ class SamplingIntegrator:
                 xyz = spec.to_xyz(L, wl) * weight
                 xyz = dr.select(dr.isfinite(xyz), xyz, 0.0)
                 extra = [dr.select(dr.isfinite(c), c, 0.0) * weight for c in extra]
-                sx, sw, *se = _pixel_sums(xyz, weight, w * h, per_pass, extra)
-            sum_xyz += sx
-            sum_w += sw
-            if se:
-                sum_extra = se[0] if sum_extra is None else sum_extra + se[0]
+                s = _pixel_sums([*xyz, weight, *extra], w * h, per_pass)
+                sums = s if sums is None else sums + s
+                if n_pass > 1:
+                    dr.eval(sums)               # one kernel per pass
             if bar:
                 bar.update(1)
         if bar:
             bar.close()
-        norm = np.maximum(sum_w, 1e-30)[:, None]
-        rgb = spec.xyz_to_srgb(sum_xyz / norm)
-        if sum_extra is not None:
-            rgb = np.concatenate([rgb, sum_extra / norm], axis=1)
-        return mi.TensorXf(rgb.astype(np.float32).reshape(h, w, rgb.shape[1]))
+        return _develop(sums, w, h)
 
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
         """Primal image: ``mi.TensorXf`` (H, W, 3), linear sRGB."""
@@ -117,8 +110,8 @@ class SamplingIntegrator:
     def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0):
         """Propagate the image adjoint ``grad_img`` (H, W, 3) to the scene parameters."""
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
-        pixel_w = mi.Float(self._pixel_weights(scene, sensor, seed, spp).astype(np.float32))
-        g = mi.Float(np.asarray(grad_img, dtype=np.float32).ravel())
+        pixel_w = self._pixel_weights(scene, sensor, seed, spp)
+        g = grad_img.array if isinstance(grad_img, mi.TensorXf) else mi.Float(np.asarray(grad_img, np.float32).ravel())
         for p in range(n_pass):
             with dr.suspend_grad():
                 rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
@@ -145,12 +138,13 @@ class SamplingIntegrator:
     def _pixel_weights(self, scene, sensor, seed, spp):
         """Sum of filter weights per pixel (depends only on the random numbers)."""
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
-        sum_w = np.zeros(w * h)
+        sum_w = None
         with dr.suspend_grad():
             for p in range(n_pass):
                 _, _, _, weight, _ = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
-                sum_w += _pixel_sums(None, weight, w * h, per_pass)[1]
-        return np.maximum(sum_w, 1e-30)
+                s = _pixel_sums([weight], w * h, per_pass)
+                sum_w = s if sum_w is None else sum_w + s
+        return dr.maximum(sum_w, 1e-30)
 
 
 def emitted_mis(scene, light, si, d, wl, on_light, escaped, prev_p, prev_n, prev_pdf, prev_delta):
@@ -177,19 +171,31 @@ def forward_derivative(Lo) -> mi.Spectrum:
     return mi.Spectrum(dr.forward_to(Lo, flags=dr.ADFlag.ClearInterior | dr.ADFlag.AllowNoGrad))
 
 
-def _pixel_sums(xyz, weight, n_pixels, per_pass, extra=()):
-    """Per-pixel sums of w * XYZ and w over a pass's pixel-major samples, reduced inside
-    the rendering kernel (a local scatter-add), so per-sample values are never stored.
-    With ``extra`` (already weighted per-sample channels) their sums come third."""
-    pixel = dr.arange(mi.UInt32, dr.width(weight)) // per_pass
-    n_ch = 4 + len(extra)
+def _pixel_sums(channels, n_pixels, per_pass):
+    """Per-pixel sums of per-sample ``channels`` over a pass's pixel-major samples,
+    reduced inside the rendering kernel (a local scatter-add), so per-sample values are
+    never stored. Returns a flat ``mi.Float``, pixel-major, ``len(channels)`` per pixel."""
+    n_ch = len(channels)
+    pixel = dr.arange(mi.UInt32, dr.width(channels[-1])) // per_pass
     acc = dr.zeros(mi.Float, n_pixels * n_ch)
-    ch = [xyz[0], xyz[1], xyz[2], weight] if xyz is not None else [None, None, None, weight]
-    for k, v in enumerate(ch + list(extra)):
-        if v is not None:
-            dr.scatter_reduce(dr.ReduceOp.Add, acc, v, pixel * n_ch + k, mode=dr.ReduceMode.Local)
-    a = np.array(acc, dtype=np.float64).reshape(n_pixels, n_ch)
-    return (a[:, :3], a[:, 3], a[:, 4:]) if extra else (a[:, :3], a[:, 3])
+    for k, v in enumerate(channels):
+        dr.scatter_reduce(dr.ReduceOp.Add, acc, v, pixel * n_ch + k, mode=dr.ReduceMode.Local)
+    return acc
+
+
+def _develop(sums, w, h):
+    """The film's image from per-pixel sums (w X, w Y, w Z, w, then weighted extra
+    channels): XYZ / w converted to linear sRGB, extra channels / w appended. Stays on
+    the device (no host round trip), so a whole render can be recorded by ``dr.freeze``."""
+    n_ch = dr.width(sums) // (w * h)
+    pixel = dr.arange(mi.UInt32, w * h)
+    ch = [dr.gather(mi.Float, sums, pixel * n_ch + k) for k in range(n_ch)]
+    inv_w = dr.rcp(dr.maximum(ch[3], 1e-30))
+    out = [*spec.xyz_to_srgb(mi.Array3f(ch[0], ch[1], ch[2]) * inv_w)] + [c * inv_w for c in ch[4:]]
+    img = dr.zeros(mi.Float, w * h * len(out))
+    for k, v in enumerate(out):
+        dr.scatter(img, v, pixel * len(out) + k)
+    return mi.TensorXf(img, (h, w, len(out)))
 
 
 def _snapshot(rng):

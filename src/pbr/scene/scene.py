@@ -6,6 +6,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .. import meshattr
+from ..backend import own_table_memory
 from ..geometry import Geometry
 
 
@@ -36,6 +37,7 @@ class Scene:
         self.bsdfs.build(self.textures)
         self.media.build(self.textures)
         self.lights.build(self, self.integrator.light_sampler)
+        own_table_memory(self)
 
     @property
     def spp(self) -> int:
