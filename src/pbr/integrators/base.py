@@ -120,7 +120,7 @@ class SamplingIntegrator:
                 L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
                 dL = self._develop_adjoint(wl, weight, pixel_w, g, pixel, inside)
                 dL = dr.select(dr.isfinite(dL), dL, 0.0)
-                dr.eval(L, dL)
+                # L and dL stay lazy: the primal and adjoint loops fuse into one kernel
                 rng.state, rng.inc = _snapshot(state)
                 self.sample(scene, rng, ray, wl, BACKWARD, dL, L, inside)
             dr.eval()
