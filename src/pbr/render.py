@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import drjit as dr
 
-from . import backend
+from . import backend, dispatch
+from .scene.tables import tables_as_leaves
 
 
 class _RenderOp(dr.CustomOp):
@@ -21,7 +22,11 @@ class _RenderOp(dr.CustomOp):
             return integrator.render(scene, sensor=sensor, seed=seed[0], spp=spp[0])
 
     def forward(self):
-        img = self.integrator.render_forward(self.scene, sensor=self.sensor, seed=self.seed[1], spp=self.spp[1])
+        # The rendering loop's forward derivative starts from the tables' tangents, and
+        # crosses family dispatch as per-lane selects (see pbr.dispatch).
+        with tables_as_leaves(self.scene, self.grad_in("params")), dispatch.by_lane():
+            img = self.integrator.render_forward(self.scene, sensor=self.sensor, seed=self.seed[1],
+                                                 spp=self.spp[1])
         self.set_grad_out(img)
 
     def backward(self):

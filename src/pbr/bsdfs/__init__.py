@@ -10,6 +10,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from .. import dispatch
 from .base import BSDFSample, BSDFType, ShadingContext, DIFFUSE, GLOSSY  # noqa: F401
 from .diffuse import Diffuse
 from .dielectric import RoughDielectric, SmoothDielectric, ThinDielectric
@@ -233,9 +234,9 @@ class BSDFSet:
         local = dr.gather(mi.UInt32, self.local_of, bsdf_id, active)
         fams = [self.families[t] for t in self.order]
         if len(fams) == 1:
-            return getattr(fams[0], method)(ctx, local, *args, active)
+            return _cast(getattr(fams[0], method)(ctx, local, *args, active))
         fam = dr.gather(mi.UInt32, self.family_of, bsdf_id, active)
-        return dr.switch(fam, [_typed(getattr(f, method)) for f in fams], ctx, local, *args, active)
+        return dispatch.switch(fam, [_typed(getattr(f, method)) for f in fams], ctx, local, *args, active)
 
     def _side(self, bsdf_id, ctx, active):
         """(entry to use, context, flip mask) after applying two-sidedness."""

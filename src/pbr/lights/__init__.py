@@ -12,6 +12,8 @@ import numpy as np
 import drjit as dr
 import mitsuba as mi
 
+from .. import dispatch
+
 from .area import AreaLight
 from .point import PointLight
 from .spot import SpotLight
@@ -104,7 +106,7 @@ class LightSet:
         if len(fams) == 1:
             return getattr(fams[0], method)(local, *args, active)
         fam = dr.gather(mi.UInt32, self.family_of, light, active)
-        return dr.switch(fam, [_typed(getattr(f, method)) for f in fams], local, *args, active)
+        return dispatch.switch(fam, [_typed(getattr(f, method)) for f in fams], local, *args, active)
 
     # -- used by integrators -----------------------------------------------------------
     def L(self, light, si, wl, active):
@@ -202,7 +204,7 @@ class LightSet:
             s = fams[0].sample_Le(local, u_pos, u_dir, wl, active)
         else:
             fam = dr.gather(mi.UInt32, self.family_of, light, active)
-            s = dr.switch(fam, [_typed_Le(f.sample_Le) for f in fams], local, u_pos, u_dir, wl, active)
+            s = dispatch.switch(fam, [_typed_Le(f.sample_Le) for f in fams], local, u_pos, u_dir, wl, active)
         s = _cast_Le(s)
         ok = active & (s.pdf_pos > 0) & (s.pdf_dir > 0) & (pmf > 0)
         cos = dr.select(s.delta_pos, 1.0, dr.abs(dr.dot(s.n, s.d)))

@@ -6,7 +6,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .. import meshattr
-from ..backend import own_table_memory
+from .tables import own_table_memory
 from ..geometry import Geometry
 
 

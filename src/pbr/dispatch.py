@@ -1,0 +1,57 @@
+"""Calling one of several families (BSDF, light) per lane.
+
+Normally a ``dr.switch``: one symbolic call, each lane runs its family's code. Forward-
+mode differentiation is the exception: Dr.Jit 1.5 cannot forward-propagate through two
+symbolic calls that share an implicit differentiable input (a parameter table) within
+one traversal ("tried to forward-propagate derivatives across edge ... outside of the
+current dr.isolate_grad() scope"), and a PRB forward pass has several such calls per
+path vertex. Inside :func:`by_lane` every family is therefore evaluated on its own lanes
+and the results are selected, which is plain differentiable arithmetic (and costs one
+evaluation per family instead of one in all).
+"""
+
+from __future__ import annotations
+
+import contextlib
+
+import drjit as dr
+
+_by_lane = False
+
+
+@contextlib.contextmanager
+def by_lane():
+    """Within the block, :func:`switch` evaluates every family and selects per lane."""
+    global _by_lane
+    prev, _by_lane = _by_lane, True
+    try:
+        yield
+    finally:
+        _by_lane = prev
+
+
+def switch(index, fns, *args):
+    """``fns[index](*args)`` per lane; the last of ``args`` is the ``active`` mask."""
+    if not _by_lane:
+        return dr.switch(index, fns, *args)
+    *rest, active = args
+    out = None
+    for k, fn in enumerate(fns):
+        mine = active & (index == k)
+        r = fn(*rest, mine)
+        out = r if out is None else _select(mine, r, out)
+    return _select(active, out, None)
+
+
+def _select(mask, a, b):
+    """``dr.select`` over a result tree (tuples, Dr.Jit structs, arrays); ``b = None``
+    selects zeros (what ``dr.switch`` gives inactive lanes)."""
+    if isinstance(a, tuple):
+        return type(a)(_select(mask, x, None if b is None else y) for x, y in zip(a, b or a))
+    fields = getattr(type(a), "DRJIT_STRUCT", None)
+    if fields:
+        out = type(a).__new__(type(a))
+        for k in fields:
+            setattr(out, k, _select(mask, getattr(a, k), None if b is None else getattr(b, k)))
+        return out
+    return dr.select(mask, a, type(a)(0) if b is None else b)
