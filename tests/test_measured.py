@@ -1,7 +1,7 @@
 """measured (RGL material files): reader, sampling vs pdf, Mitsuba's plugin on the same
 file (pointwise and images), and the analytic BRDF a synthetic file was tabulated from.
 
-No RGL file is available offline: ``rgl_synth`` writes files tabulating a GGX gold
+No RGL file is available offline: ``pbr.bsdfs.rgl_synth`` writes files tabulating a GGX gold
 conductor (isotropic; anisotropic over all azimuths; anisotropic over a quarter of them,
 Mitsuba's ``reduction`` 4)."""
 
@@ -17,7 +17,7 @@ from pbr import validate
 from pbr.bsdfs.measured import RGLMaterial, read_tensor_file
 from bsdf_harness import OneBSDF, assert_scene_error, chi2_rotated, direction, random_samples, shared_family_results
 from mitsuba_scenes import BATCHES, SPP, compare_with_mitsuba, material_box
-from rgl_synth import write_ggx, write_tensor_file
+from pbr.bsdfs.rgl_synth import write_ggx, write_tensor_file
 
 LAM = (450.0, 520.0, 600.0, 680.0)
 

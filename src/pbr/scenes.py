@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import mitsuba as mi
 import numpy as np
 
@@ -48,7 +50,13 @@ def cornell_box(resolution: int = 256, spp: int = 64) -> dict:
     }
 
 
+# The gallery's data files (written by scenes/data/make_gallery_data.py). The dict holds
+# absolute paths; ``to_xml(d, base_dir=...)`` writes them relative to the scene file.
+GALLERY_DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
+                            "scenes", "data")
+
 # One entry per BSDF family: (label, bsdf dict). Extended as families are added.
+# ``hair`` is shown on a tuft of curves (GALLERY_DATA/hair_tuft.txt), the others on spheres.
 GALLERY_MATERIALS = [
     ("diffuse", {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.2, 0.2]}}),
     ("conductor Au", {"type": "conductor", "material": "Au"}),
@@ -75,12 +83,14 @@ GALLERY_MATERIALS = [
                    "b": {"type": "roughconductor", "material": "Ag", "alpha": 0.1}}),
     ("twosided", {"type": "twosided", "b": {"type": "diffuse", "reflectance":
                                             {"type": "checkerboard", "to_uv": np.diag([8.0, 8.0, 1.0, 1.0])}}}),
+    ("measured (GGX Au table)", {"type": "measured", "filename": os.path.join(GALLERY_DATA, "gold_ggx.bsdf")}),
+    ("hair", {"type": "hair", "eumelanin": 0.15, "pheomelanin": 0.8}),
 ]
 
 
 def materials_gallery(resolution: int = 480, spp: int = 64, materials=None) -> dict:
-    """A grid of spheres, one per BSDF family (``GALLERY_MATERIALS``), on a diffuse floor
-    under an area light: a Mitsuba-style scene dict."""
+    """A grid of spheres, one per BSDF family (``GALLERY_MATERIALS``; ``hair`` on a tuft of
+    fibres instead), on a diffuse floor under an area light: a Mitsuba-style scene dict."""
     from .bsdfs import BSDF_TYPES
     mats = [m for m in (materials or GALLERY_MATERIALS) if m[1]["type"] in BSDF_TYPES or
             m[1]["type"] in ("twosided", "mask", "blendbsdf", "mix", "normalmap", "bumpmap")]
@@ -106,5 +116,9 @@ def materials_gallery(resolution: int = 480, spp: int = 64, materials=None) -> d
         r, c = divmod(i, cols)
         x = (c - (cols - 1) / 2) * 1.3
         z = (r - (rows - 1) / 2) * 1.4
-        d[f"sphere-{i:02d}"] = {"type": "sphere", "radius": 0.5, "center": [x, 0.0, z], "bsdf": bsdf}
+        if bsdf["type"] == "hair":
+            d[f"hair-{i:02d}"] = {"type": "bsplinecurve", "filename": os.path.join(GALLERY_DATA, "hair_tuft.txt"),
+                                  "to_world": T().translate([x, -0.5, z]), "bsdf": bsdf}
+        else:
+            d[f"sphere-{i:02d}"] = {"type": "sphere", "radius": 0.5, "center": [x, 0.0, z], "bsdf": bsdf}
     return d

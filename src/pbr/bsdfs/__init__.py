@@ -285,7 +285,7 @@ class BSDFSet:
         ``wo`` mirrored alongside) and the normal/bump perturbation. Returns (entry,
         context, wo, flip mask or None, perturbation or None)."""
         bsdf_id, ctx, flip = self._side(bsdf_id, ctx, active)
-        if flip is not None:
+        if flip is not None and wo is not None:
             wo = _flip(wo, flip)
         return bsdf_id, ctx, wo, flip, self._perturb(bsdf_id, ctx, active)
 
@@ -316,6 +316,13 @@ class BSDFSet:
             f, pdf = f * opacity, pdf * opacity
         return f, pdf
 
+    def _dispatch_eval_pdf_sample(self, bsdf_id, ctx, active, wo, u1, u2):
+        """The families' ``eval_pdf_sample``, or their ``sample`` alone (f, pdf None)
+        when there is no ``wo`` to evaluate."""
+        if wo is None:
+            return None, None, self._dispatch("sample", bsdf_id, ctx, active, u1, u2)
+        return self._dispatch("eval_pdf_sample", bsdf_id, ctx, active, wo, u1, u2)
+
     def _entry_eval_pdf_sample(self, bsdf_id, ctx, wo, u1, u2, active):
         opacity = self._opacity(bsdf_id, ctx, active)
         wi_world_side = ctx.si.wi
@@ -326,20 +333,22 @@ class BSDFSet:
         bsdf_id, ctx, wo, flip, pert = self._resolve(bsdf_id, ctx, wo, active)
         if pert is not None:
             ctx, frame, has = pert
-            wo_p, ok = self._to_perturbed(frame, has, wo)
-            f, pdf, bs = self._dispatch("eval_pdf_sample", bsdf_id, ctx, active, wo_p, u1, u2)
-            f, pdf = self._perturbed_value(frame, has, wo, ok, f, pdf)
+            wo_p, ok = (None, None) if wo is None else self._to_perturbed(frame, has, wo)
+            f, pdf, bs = self._dispatch_eval_pdf_sample(bsdf_id, ctx, active, wo_p, u1, u2)
+            if wo is not None:
+                f, pdf = self._perturbed_value(frame, has, wo, ok, f, pdf)
             wo_s = dr.select(has, frame.to_world(bs.wo), bs.wo)
             ok_s = ~has | (bs.wo.z * wo_s.z > 0)
             bs.wo = wo_s
             bs.weight = self._perturbed_value(frame, has, wo_s, ok_s, bs.weight)[0]
             bs.pdf = dr.select(ok_s, bs.pdf, 0.0)
         else:
-            f, pdf, bs = self._dispatch("eval_pdf_sample", bsdf_id, ctx, active, wo, u1, u2)
+            f, pdf, bs = self._dispatch_eval_pdf_sample(bsdf_id, ctx, active, wo, u1, u2)
         if flip is not None:
             bs.wo = _flip(bs.wo, flip)
         if opacity is not None:
-            f, pdf = f * opacity, pdf * opacity
+            if wo is not None:
+                f, pdf = f * opacity, pdf * opacity
             bs.pdf = bs.pdf * opacity
             null = pass_through(wi_world_side, 1.0 - opacity, active & through)
             bs = dr.select(through, _cast(null), _cast(bs))
@@ -365,12 +374,14 @@ class BSDFSet:
         return dr.fma(w, fb - fa, fa), dr.fma(w, pb - pa, pa)
 
     def sample(self, bsdf_id, ctx, u1, u2, active) -> BSDFSample:
-        return self.eval_pdf_sample(bsdf_id, ctx, mi.Vector3f(0, 0, 1), u1, u2, active)[2]
+        """A sampled direction of entry ``bsdf_id`` (no evaluation toward another ``wo``)."""
+        return self.eval_pdf_sample(bsdf_id, ctx, None, u1, u2, active)[2]
 
     def eval_pdf_sample(self, bsdf_id, ctx, wo, u1, u2, active):
-        """``eval_pdf(wo)`` and a sampled direction at once. For a blend, one component is
-        sampled (chosen with its weight) but a non-delta sample reports the mixture's pdf
-        and f / pdf, so that MIS sees the density the direction really has."""
+        """``eval_pdf(wo)`` and a sampled direction at once (``wo`` None: the sample only,
+        f and pdf None). For a blend, one component is sampled (chosen with its weight) but
+        a non-delta sample reports the mixture's pdf and f / pdf, so that MIS sees the
+        density the direction really has."""
         if not self.blends:
             return self._entry_eval_pdf_sample(bsdf_id, ctx, wo, u1, u2, active)
         a, b, w, is_blend = self._blend(bsdf_id, ctx, active)
@@ -378,12 +389,13 @@ class BSDFSet:
         u1 = dr.select(is_blend, dr.select(take_b, u1 / dr.maximum(w, 1e-12), (u1 - w) / dr.maximum(1.0 - w, 1e-12)), u1)
         chosen = dr.select(take_b, b, a)
         f, pdf, bs = self._entry_eval_pdf_sample(chosen, ctx, wo, u1, u2, active)
-        # eval toward wo: the other component as well.
         other = dr.select(take_b, a, b)
-        fo, po = self._entry_eval_pdf(other, ctx, wo, is_blend)
         wc = dr.select(take_b, w, 1.0 - w)
-        f = dr.select(is_blend, wc * f + (1.0 - wc) * fo, f)
-        pdf = dr.select(is_blend, wc * pdf + (1.0 - wc) * po, pdf)
+        if wo is not None:
+            # eval toward wo: the other component as well.
+            fo, po = self._entry_eval_pdf(other, ctx, wo, is_blend)
+            f = dr.select(is_blend, wc * f + (1.0 - wc) * fo, f)
+            pdf = dr.select(is_blend, wc * pdf + (1.0 - wc) * po, pdf)
         # The sampled direction: mixture density and weight unless the lobe was a delta.
         mix = is_blend & ~bs.delta & (bs.pdf > 0)
         f_c = bs.weight * bs.pdf

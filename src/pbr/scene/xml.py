@@ -509,12 +509,19 @@ def _parse(text, file: str, base_dir: str, kwargs: dict) -> dict:
 
 # ----------------------------------------------------------------------------- writing
 
-def to_xml(d: dict) -> str:
+def to_xml(d: dict, base_dir: str | None = None) -> str:
     """Mitsuba 3 XML for a scene dict (the inverse of :func:`parse_string` for the value
     kinds it produces: numbers, booleans, strings, 3-vectors, rgb/spectrum/blackbody
-    values, transforms, references and nested objects)."""
+    values, transforms, references and nested objects). With ``base_dir`` (the directory
+    the XML file will be in), absolute ``filename`` values are written relative to it, as
+    the XML loaders resolve them, so a scene folder can be moved or shared as a whole."""
     import numpy as np
     from xml.sax.saxutils import quoteattr
+
+    def filename(v):
+        if base_dir is None or not os.path.isabs(v):
+            return v
+        return os.path.relpath(v, os.path.abspath(base_dir)).replace(os.sep, "/")
 
     def num(v):
         return repr(float(v)) if not float(v).is_integer() else str(float(v))
@@ -533,6 +540,7 @@ def to_xml(d: dict) -> str:
         if isinstance(v, float):
             return f'{pad}<float name={q} value="{num(v)}"/>'
         if isinstance(v, str):
+            v = filename(v) if name == "filename" else v
             return f"{pad}<string name={q} value={quoteattr(v)}/>"
         if hasattr(v, "matrix") or (isinstance(v, np.ndarray) and v.size == 16):
             return f'{pad}<transform name={q}><matrix value="{matrix(v)}"/></transform>'

@@ -2,7 +2,8 @@
 from an analytic BRDF: a GGX rough conductor with a spectral complex IOR. No measured
 file is available offline, so the tests tabulate a known BRDF on the format's grids,
 write it, and check the ``measured`` BSDF (reader, warps, evaluation) against it and
-against Mitsuba's ``measured`` plugin reading the same file.
+against Mitsuba's ``measured`` plugin reading the same file; the materials gallery's
+``measured`` sphere shows such a file (``scenes/data/make_gallery_data.py``).
 
 What each field holds here (see pbr.bsdfs.measured for how a reader combines them):
 
@@ -116,7 +117,7 @@ def _u_grid(n_y, n_x):
 
 def gold(wavelengths):
     """eta, k of gold (Mitsuba's data) at ``wavelengths``."""
-    from pbr.spectrum import read_spd
+    from ..spectrum import read_spd
     d = os.path.join(os.path.dirname(mi.__file__), "data", "ior")
     out = []
     for c in ("eta", "k"):
@@ -178,12 +179,12 @@ def write_ggx(path, alpha_u=0.2, alpha_v=None, wavelengths=np.arange(360.0, 831.
     wo = 2 * cos_im * m - wi
     S = model.fresnel(cos_im) * (model.G1(wo) * (cos_im > 0))[:, None]
     S = S.reshape(len(phi_i), len(theta_i), sample_res, sample_res, -1).transpose(0, 1, 4, 2, 3)
-    from pbr.spectrum import cie_tables_np
+    from ..spectrum import cie_tables_np
     ybar = np.interp(wavelengths, np.arange(360.0, 831.0, 5.0), cie_tables_np()[0][:, 1])
     lum = np.tensordot(S, ybar / ybar.sum(), axes=([2], [0]))
 
     write_tensor_file(path, {
-        "description": f"synthetic GGX conductor alpha=({alpha_u}, {alpha_v}) (pbr tests)",
+        "description": f"synthetic GGX conductor alpha=({alpha_u}, {alpha_v}) (pbr.bsdfs.rgl_synth)",
         "phi_i": phi_i.astype(np.float32),
         "theta_i": theta_i.astype(np.float32),
         "wavelengths": np.asarray(wavelengths, np.float32),
