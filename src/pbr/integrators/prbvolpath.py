@@ -270,6 +270,7 @@ class PRBVolPathIntegrator(_MediumAware):
             bs = dr.detach(bs)
             sray = si.spawn_ray(ls.wi)
             sray.o[sc] = p_sc
+            sray = VolPathIntegrator._aim(sray, ls.p)
             s_med = medium
             if has_media:
                 s_med = VolPathIntegrator._enter(scene, shape, si, ls.wi, medium, nee & rs)
