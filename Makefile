@@ -22,6 +22,7 @@ test-slow: $(STAMP)
 	$(PY) -m pytest -q --runslow $(PYTEST_ARGS)
 
 bench: $(STAMP)
+	$(PY) -m pip install -q -e '.[test,bench]'
 	$(PY) benchmarks/bench_cornell.py
 
 clean:
