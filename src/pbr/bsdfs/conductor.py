@@ -90,8 +90,12 @@ class RoughConductor(Conductor):
             raise props.error("alpha", "give either 'alpha' or 'alpha_u'/'alpha_v'")
         au = props.raw("alpha_u", props.raw("alpha", 0.1))
         av = props.raw("alpha_v", props.raw("alpha", 0.1) if not props.has("alpha_u") else au)
+        anisotropic = props.has("alpha_u") or props.has("alpha_v")
         au = load_spectrum(loader, au, props.key("alpha_u" if props.has("alpha_u") else "alpha"), emitter=False)
-        av = load_spectrum(loader, av, props.key("alpha_v" if props.has("alpha_v") else "alpha"), emitter=False)
+        # Isotropic: one slot for both directions, so that the parameter <bsdf>.alpha
+        # moves both (two slots under one key left alpha_v at its loaded value).
+        av = (load_spectrum(loader, av, props.key("alpha_v" if props.has("alpha_v") else "alpha"), emitter=False)
+              if anisotropic else au)
         # Visible-normal sampling exists for GGX only (see Microfacet).
         visible = props.bool("sample_visible", True) and dist == GGX
         i = super().add(loader, props)

@@ -273,7 +273,9 @@ class _Layered(BSDFType):
         for v, k in zip(vals, keys):
             if _number(v) and v < 0:
                 raise props.error(k, f"roughness must be >= 0, got {v}")
-            slots.append(load_spectrum(loader, v, props.key(k), emitter=False, unbounded=True))
+            # Both axes from ``roughness``: one slot, so that the parameter moves both.
+            slots.append(slots[0] if slots and k == keys[0] else
+                         load_spectrum(loader, v, props.key(k), emitter=False, unbounded=True))
         if all(_number(v) for v in vals):
             alpha = max((float(v) ** 0.5 if remap else float(v)) for v in vals)
             kind = SMOOTH if alpha < _SMOOTH_ALPHA else ROUGH

@@ -101,7 +101,11 @@ class PathIntegrator(SamplingIntegrator):
             u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
             with dr.resume_grad(when=not primal):
                 f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, active_next)
-                w_em = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf, pdf_em))
+                # The MIS weight is detached (as Mitsuba's): the BSDF-sampled half of
+                # the same integral carries a detached weight, so an attached one here
+                # would add d(w_em) without its counterpart -d(w_em) (biased gradients
+                # for any parameter the BSDF pdf depends on: eta, alpha).
+                w_em = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf, dr.detach(pdf_em)))
                 Ld = dr.select(em, beta * f_em * ls.L * (w_em / ls.pdf), 0.0)
             bs = dr.detach(bs)
             cont = active_next & (bs.pdf > 0)

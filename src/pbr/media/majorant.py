@@ -56,8 +56,14 @@ def start(media, m, ray: mi.Ray3f, t_max, active) -> MajorantIterator:
         hi = dr.select(flat, dr.select(inside, dr.inf, -dr.inf), hi)
         t0, t1 = dr.maximum(t0, lo), dr.minimum(t1, hi)
     empty = t0 >= t1
-    it.t[grid] = dr.select(empty, t_max, t0)
-    it.t_end[grid] = dr.select(empty, t_max, t1)
+    # A segment that misses the cube has nothing to walk: it starts and ends at one
+    # finite point with no cell boundary ahead (t_next stays inf), so step() reports it
+    # done with T_maj = 1. (A DDA set up at a point outside the cube found boundaries
+    # behind it: negative distances, T_maj > 1; at t_max = inf, NaN.)
+    t_skip = dr.select(dr.isfinite(mi.Float(t_max)), t_max, 0.0)
+    it.t[grid] = dr.select(empty, t_skip, t0)
+    it.t_end[grid] = dr.select(empty, t_skip, t1)
+    grid &= ~empty
     # DDA set-up at the entry point.
     r = MAJORANT_RES
     pos = o + d * it.t
