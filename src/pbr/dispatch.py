@@ -30,6 +30,12 @@ def by_lane():
         _by_lane = prev
 
 
+def branching() -> bool:
+    """Whether code may use symbolic conditionals to skip work (not within
+    :func:`by_lane`, where every branch is plain arithmetic for the same reason)."""
+    return not _by_lane
+
+
 def switch(index, fns, *args):
     """``fns[index](*args)`` per lane; the last of ``args`` is the ``active`` mask."""
     if not _by_lane:

@@ -34,7 +34,7 @@ import numpy as np
 import drjit as dr
 import mitsuba as mi
 
-from . import meshattr
+from . import dispatch, meshattr
 from . import spectrum as spec
 from .meshattr import MeshAttribute
 from .scene.props import Props, SceneError
@@ -444,7 +444,15 @@ class TextureSet:
             result = self._eval_constant(ci, lam, on, illuminant)
         if self.bitmaps:
             is_bm = active & (kind == BITMAP)
-            result = dr.select(is_bm, self._eval_bitmap(idx, uv, lam, is_bm, illuminant), result)
+            if len(self.bitmaps) < len(self.items) and dispatch.branching():
+                # A symbolic conditional: vector packets with no bitmap lane skip the
+                # lookup (four texel spectra), instead of computing and discarding it.
+                result = dr.if_stmt(
+                    (idx, uv, lam, is_bm, result), is_bm,
+                    lambda i, u, l, m, r: mi.Spectrum(self._eval_bitmap(i, u, l, m, illuminant)),
+                    lambda i, u, l, m, r: r, label="bitmap texture")
+            else:
+                result = dr.select(is_bm, self._eval_bitmap(idx, uv, lam, is_bm, illuminant), result)
         if self.mesh_data and si is not None:   # elsewhere mesh attributes are 0
             is_ma = active & (kind == MESH_ATTRIBUTE)
             result = dr.select(is_ma, meshattr.evaluate(self, idx, si, lam, is_ma), result)
