@@ -73,6 +73,7 @@ import numpy as np
 import pbr
 import drjit as dr
 from pbr import validate
+from pbr.plotting import pyplot
 from pbr.integrators import INTEGRATORS
 
 HERE = Path(__file__).resolve().parent
@@ -244,11 +245,8 @@ def plot(rows, targets, path, title):
     """relMSE vs time, one line per integrator, one column per scene; top row wall-clock
     time, bottom row CPU time (when the rows have it). Returns the path, or None
     without matplotlib."""
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
+    plt = pyplot()
+    if plt is None:
         print("matplotlib is not installed (pip install -e '.[bench]'): no plot")
         return None
     scenes = list(dict.fromkeys(r["scene"] for r in rows))

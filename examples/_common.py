@@ -16,12 +16,12 @@ import argparse
 import os
 import sys
 import time
-import types
 from dataclasses import dataclass, field
 
 import numpy as np
 
 import pbr  # first: pbr chooses the libLLVM that Dr.Jit loads
+from pbr.plotting import pyplot
 import drjit as dr
 import mitsuba as mi
 
@@ -150,22 +150,6 @@ def rmse(a, b, weights=None) -> float:
         return float(np.sqrt(d2.mean()))
     w = np.broadcast_to(np.asarray(weights, np.float64), d2.shape)
     return float(np.sqrt((w * d2).sum() / w.sum()))
-
-
-def pyplot():
-    """``matplotlib.pyplot`` (Agg backend outside Jupyter) or None when matplotlib is not
-    installed (colour-science puts a ``MagicMock`` under ``sys.modules["matplotlib"]``
-    when it is missing, so a successful import alone proves nothing)."""
-    try:
-        import matplotlib
-        if not isinstance(matplotlib, types.ModuleType):
-            return None
-        if "ipykernel" not in sys.modules:      # scripts: files only; Jupyter: inline
-            matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-        return plt
-    except ImportError:
-        return None
 
 
 def side_by_side(result: Result, sensor: int = 0, spp: int = 64):

@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 import pbr  # noqa: F401  (chooses libLLVM before Dr.Jit loads)
+from pbr.plotting import pyplot
 
 ROOT = Path(__file__).resolve().parent.parent
 ARGS = ["--quick", "--res", "16", "--budgets", "4,64", "--ref-spp", "4096", "--max-time", "1.0", "--min-budgets", "1"]
@@ -55,7 +56,7 @@ def test_quick_run_lists_every_integrator(bench, quick_run):
     benched_classes = {INTEGRATORS[n] for n in bench.BENCHED}
     for name, cls in INTEGRATORS.items():
         assert name in bench.BENCHED or name in bench.EXCLUDED or cls in benched_classes, name
-    if importlib.util.find_spec("matplotlib") is not None:
+    if pyplot() is not None:
         assert (d / "out" / "bench_integrators.png").stat().st_size > 10_000
 
 
