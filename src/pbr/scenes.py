@@ -91,9 +91,11 @@ GALLERY_MATERIALS = [
 def materials_gallery(resolution: int = 480, spp: int = 64, materials=None) -> dict:
     """A grid of spheres, one per BSDF family (``GALLERY_MATERIALS``; ``hair`` on a tuft of
     fibres instead), on a diffuse floor under an area light: a Mitsuba-style scene dict."""
+    from . import backend
     from .bsdfs import BSDF_TYPES
     mats = [m for m in (materials or GALLERY_MATERIALS) if m[1]["type"] in BSDF_TYPES or
             m[1]["type"] in ("twosided", "mask", "blendbsdf", "mix", "normalmap", "bumpmap")]
+    backend.ensure()
     T = mi.ScalarTransform4f
     cols = 5
     rows = (len(mats) + cols - 1) // cols
