@@ -30,6 +30,15 @@ class _RenderOp(dr.CustomOp):
         self.set_grad_out(img)
 
     def backward(self):
+        layered = sorted({"coateddiffuse", "coatedconductor"} & set(self.scene.bsdfs.families))
+        if layered:
+            # Their random walks are symbolic loops inside the path; Dr.Jit 1.5 cannot
+            # reverse-differentiate them (it needs a trajectory bound, and with one it
+            # generated invalid LLVM IR). Forward mode works.
+            raise NotImplementedError(
+                f"pbr.render: reverse-mode gradients of scenes with layered BSDFs ({', '.join(layered)}) "
+                f"are not supported (Dr.Jit 1.5 cannot differentiate their random-walk loops in reverse); "
+                f"use forward mode (dr.forward) or remove them")
         self.integrator.render_backward(self.scene, self.grad_out(), sensor=self.sensor,
                                         seed=self.seed[1], spp=self.spp[1])
 

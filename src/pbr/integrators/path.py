@@ -129,7 +129,9 @@ class PathIntegrator(SamplingIntegrator):
                     Lr = L * dr.replace_grad(mi.Spectrum(1.0), ratio)
                     Lo = Le + Ld + dr.select(cont & ~bs.delta, Lr, 0.0)
                     if mode == BACKWARD:
-                        dr.backward_from(dL * Lo)
+                        # AllowNoGrad: a parameter may not reach this vertex at all (e.g. the
+                        # IOR of a smooth dielectric: delta lobes carry no derivative here).
+                        dr.backward_from(dL * Lo, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
                     else:
                         dL_fwd += forward_derivative(Lo)
 
