@@ -107,6 +107,10 @@ class PathIntegrator(SamplingIntegrator):
                 # for any parameter the BSDF pdf depends on: eta, alpha).
                 w_em = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf, dr.detach(pdf_em)))
                 Ld = dr.select(em, beta * f_em * ls.L * (w_em / ls.pdf), 0.0)
+                # A delta lobe cannot be evaluated toward a direction; its attached value
+                # is the sample's weight times the lobe's choice probability (e.g. the
+                # Fresnel reflectance of a smooth dielectric).
+                f_delta = bs.weight * bs.pdf
             bs = dr.detach(bs)
             cont = active_next & (bs.pdf > 0)
 
@@ -124,13 +128,13 @@ class PathIntegrator(SamplingIntegrator):
                 L = L - Le - Ld
                 with dr.resume_grad():
                     f_bs, _ = bsdfs.eval_pdf(bsdf_id, ctx, bs.wo, cont & ~bs.delta)
+                    f_bs = dr.select(bs.delta, f_delta, f_bs)
                     f_det = bs.weight * bs.pdf
                     ratio = dr.select(f_det != 0, f_bs * dr.rcp(dr.detach(f_det)), 0.0)
                     Lr = L * dr.replace_grad(mi.Spectrum(1.0), ratio)
-                    Lo = Le + Ld + dr.select(cont & ~bs.delta, Lr, 0.0)
+                    Lo = Le + Ld + dr.select(cont, Lr, 0.0)
                     if mode == BACKWARD:
-                        # AllowNoGrad: a parameter may not reach this vertex at all (e.g. the
-                        # IOR of a smooth dielectric: delta lobes carry no derivative here).
+                        # AllowNoGrad: a parameter may not reach this vertex at all.
                         dr.backward_from(dL * Lo, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
                     else:
                         dL_fwd += forward_derivative(Lo)
