@@ -170,3 +170,25 @@ class VariantStruct(type):
     def DRJIT_STRUCT(cls):
         return {k: (getattr(mi, v) if isinstance(v, str) else v) for k, v in cls._fields.items()}
 
+
+
+class Struct(metaclass=VariantStruct):
+    """Base of pbr's Dr.Jit structs. ``_fields`` maps field names (in order) to type
+    names; the constructor takes fields positionally in that order or by name, and a
+    field left out is ``_defaults.get(name, 0)`` converted to its type."""
+
+    _fields: dict = {}
+    _defaults: dict = {}
+
+    def __init__(self, *args, **kwargs):
+        names = list(self._fields)
+        if len(args) > len(names):
+            raise TypeError(f"{type(self).__name__}() takes at most {len(names)} fields, got {len(args)}")
+        given = dict(zip(names, args))
+        for k, v in kwargs.items():
+            if k not in self._fields or k in given:
+                raise TypeError(f"{type(self).__name__}(): unexpected or repeated field {k!r}")
+            given[k] = v
+        for name, tp in type(self).DRJIT_STRUCT.items():
+            v = given.get(name)
+            setattr(self, name, v if v is not None else tp(self._defaults.get(name, 0)))

@@ -12,7 +12,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .backend import VariantStruct
+from .backend import Struct
 from .films import HDRFilm
 from .samplers import SAMPLERS, IndependentSampler
 from .scene.props import Props
@@ -157,18 +157,10 @@ class PerspectiveCamera:
         return CameraWiSample(We, wi, pdf, pos, p, valid)
 
 
-class CameraWiSample(metaclass=VariantStruct):
+class CameraWiSample(Struct):
     """Result of :meth:`PerspectiveCamera.sample_Wi` (fields documented there)."""
 
     _fields = {"We": "Float", "wi": "Vector3f", "pdf": "Float", "pos": "Point2f", "p": "Point3f", "valid": "Bool"}
-
-    def __init__(self, We=None, wi=None, pdf=None, pos=None, p=None, valid=None):
-        self.We = We if We is not None else mi.Float(0)
-        self.wi = wi if wi is not None else mi.Vector3f(0)
-        self.pdf = pdf if pdf is not None else mi.Float(0)
-        self.pos = pos if pos is not None else mi.Point2f(0)
-        self.p = p if p is not None else mi.Point3f(0)
-        self.valid = valid if valid is not None else mi.Bool(False)
 
 
 SENSORS = {"perspective": PerspectiveCamera}

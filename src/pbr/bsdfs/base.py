@@ -13,14 +13,14 @@ from __future__ import annotations
 
 import mitsuba as mi
 
-from ..backend import VariantStruct
+from ..backend import Struct, VariantStruct
 from ..spectrum import SampledWavelengths
 
 # Lobe flags (Python ints: a kernel only contains code for flags a scene has).
 REFLECTION, TRANSMISSION, DIFFUSE, GLOSSY, SPECULAR = 1, 2, 4, 8, 16
 
 
-class BSDFSample(metaclass=VariantStruct):
+class BSDFSample(Struct):
     """A sampled direction: ``wo`` (local), its solid-angle ``pdf``, the relative IOR
     ``eta`` crossed, whether the lobe was a Dirac delta, ``weight`` = f cos / pdf, and
     ``terminate``: the direction depends on the wavelength (dispersion), so only the
@@ -28,14 +28,7 @@ class BSDFSample(metaclass=VariantStruct):
 
     _fields = {"wo": "Vector3f", "pdf": "Float", "eta": "Float", "delta": "Bool", "weight": "Spectrum",
                "terminate": "Bool"}
-
-    def __init__(self, wo=None, pdf=None, eta=None, delta=None, weight=None, terminate=None):
-        self.wo = wo if wo is not None else mi.Vector3f(0)
-        self.pdf = pdf if pdf is not None else mi.Float(0)
-        self.eta = eta if eta is not None else mi.Float(1)
-        self.delta = delta if delta is not None else mi.Bool(False)
-        self.weight = weight if weight is not None else mi.Spectrum(0)
-        self.terminate = terminate if terminate is not None else mi.Bool(False)
+    _defaults = {"eta": 1.0}
 
 
 class ShadingContext(metaclass=VariantStruct):
@@ -57,6 +50,7 @@ class BSDFType:
 
     name = ""
     flags = 0
+    reverse_differentiable = True   # reverse-mode AD through its code works (see _Layered)
 
     def __init__(self):
         self.instances: list = []

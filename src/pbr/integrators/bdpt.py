@@ -50,7 +50,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from ..backend import VariantStruct
+from ..backend import Struct
 from ..bsdfs.base import ShadingContext
 from ..lights.directional import DirectionalLight
 from ..lights.directionalarea import DirectionalAreaLight
@@ -70,7 +70,7 @@ DELTA_POSITION, DELTA_DIRECTION, INFINITE_LIGHT = 1, 2, 4
 MAX_SAMPLES_PER_PASS = 1 << 18   # camera samples per pass (each stores its light subpath)
 
 
-class LightVertex(metaclass=VariantStruct):
+class LightVertex(Struct):
     """A stored light-subpath vertex: the ray that found it (``o``, ``d``), its position
     ``p``, geometric normal ``n`` (0 for a point light), throughput ``beta``, forward
     density ``fwd`` (area measure; solid angle for y_0 of an infinite light), the MIS
@@ -78,16 +78,6 @@ class LightVertex(metaclass=VariantStruct):
 
     _fields = {"o": "Point3f", "d": "Vector3f", "p": "Point3f", "n": "Normal3f", "beta": "Spectrum",
                "fwd": "Float", "E": "Float", "flags": "UInt32"}
-
-    def __init__(self, o=None, d=None, p=None, n=None, beta=None, fwd=None, E=None, flags=None):
-        self.o = o if o is not None else mi.Point3f(0)
-        self.d = d if d is not None else mi.Vector3f(0)
-        self.p = p if p is not None else mi.Point3f(0)
-        self.n = n if n is not None else mi.Normal3f(0)
-        self.beta = beta if beta is not None else mi.Spectrum(0)
-        self.fwd = fwd if fwd is not None else mi.Float(0)
-        self.E = E if E is not None else mi.Float(0)
-        self.flags = flags if flags is not None else mi.UInt32(0)
 
 
 # ------------------------------------------------------------------------ MIS weights

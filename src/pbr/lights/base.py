@@ -14,18 +14,11 @@ from __future__ import annotations
 
 import mitsuba as mi
 
-from ..backend import VariantStruct
+from ..backend import Struct
 
 
-class LightSample(metaclass=VariantStruct):
+class LightSample(Struct):
     _fields = {"L": "Spectrum", "wi": "Vector3f", "pdf": "Float", "p": "Point3f", "delta": "Bool"}
-
-    def __init__(self, L=None, wi=None, pdf=None, p=None, delta=None):
-        self.L = L if L is not None else mi.Spectrum(0)
-        self.wi = wi if wi is not None else mi.Vector3f(0)
-        self.pdf = pdf if pdf is not None else mi.Float(0)
-        self.p = p if p is not None else mi.Point3f(0)
-        self.delta = delta if delta is not None else mi.Bool(False)
 
 
 class LightType:
@@ -81,7 +74,7 @@ class LightType:
         raise NotImplementedError
 
 
-class LeSample(metaclass=VariantStruct):
+class LeSample(Struct):
     """A ray leaving a light (pbrt-v4's ``SampleLe``, Mitsuba's ``sample_ray``), for light
     tracing, BDPT and photon mapping.
 
@@ -100,18 +93,3 @@ class LeSample(metaclass=VariantStruct):
     _fields = {"o": "Point3f", "d": "Vector3f", "L": "Spectrum", "pdf_pos": "Float", "pdf_dir": "Float",
                "pmf": "Float", "n": "Normal3f", "weight": "Spectrum", "delta_pos": "Bool", "delta_dir": "Bool",
                "infinite": "Bool", "light": "UInt32"}
-
-    def __init__(self, o=None, d=None, L=None, pdf_pos=None, pdf_dir=None, n=None, delta_pos=None,
-                 delta_dir=None, infinite=None, pmf=None, weight=None, light=None):
-        self.o = o if o is not None else mi.Point3f(0)
-        self.d = d if d is not None else mi.Vector3f(0)
-        self.L = L if L is not None else mi.Spectrum(0)
-        self.pdf_pos = pdf_pos if pdf_pos is not None else mi.Float(0)
-        self.pdf_dir = pdf_dir if pdf_dir is not None else mi.Float(0)
-        self.pmf = pmf if pmf is not None else mi.Float(0)
-        self.n = n if n is not None else mi.Normal3f(0)
-        self.weight = weight if weight is not None else mi.Spectrum(0)
-        self.delta_pos = delta_pos if delta_pos is not None else mi.Bool(False)
-        self.delta_dir = delta_dir if delta_dir is not None else mi.Bool(False)
-        self.infinite = infinite if infinite is not None else mi.Bool(False)
-        self.light = light if light is not None else mi.UInt32(0)

@@ -26,7 +26,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..backend import VariantStruct
+from ..backend import Struct
 from ..phase import HG, RAYLEIGH, G_MAX, phase_eval, phase_sample
 from ..scene.params import ParamOwner, param_table
 from ..scene.props import Props, SceneError
@@ -39,15 +39,10 @@ TA, AS = 0, 1          # parameter forms: (sigma_t, albedo) or (sigma_a, sigma_s
 NO_GRID = 0xFFFFFFFF
 
 
-class MediumProperties(metaclass=VariantStruct):
+class MediumProperties(Struct):
     """Coefficients of a medium at a point, for the sampled wavelengths."""
 
     _fields = {"sigma_a": "Spectrum", "sigma_s": "Spectrum", "Le": "Spectrum"}
-
-    def __init__(self, sigma_a=None, sigma_s=None, Le=None):
-        self.sigma_a = sigma_a if sigma_a is not None else mi.Spectrum(0)
-        self.sigma_s = sigma_s if sigma_s is not None else mi.Spectrum(0)
-        self.Le = Le if Le is not None else mi.Spectrum(0)
 
 
 class _Medium:

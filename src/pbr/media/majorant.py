@@ -15,25 +15,18 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from ..backend import VariantStruct
+from ..backend import Struct
 from .grid import MAJORANT_RES
 
 
-class MajorantIterator(metaclass=VariantStruct):
+class MajorantIterator(Struct):
     """Position ``t`` along the ray, end ``t_end`` of the medium segment, and the DDA
     state (current ``cell``, next boundary crossing ``t_next`` and spacing ``dt`` per
     axis, ``step`` direction) of grid media."""
 
     _fields = {"t": "Float", "t_end": "Float", "cell": "Vector3i", "t_next": "Vector3f",
                "dt": "Vector3f", "step": "Vector3i"}
-
-    def __init__(self, t=None, t_end=None, cell=None, t_next=None, dt=None, step=None):
-        self.t = t if t is not None else mi.Float(0)
-        self.t_end = t_end if t_end is not None else mi.Float(0)
-        self.cell = cell if cell is not None else mi.Vector3i(0)
-        self.t_next = t_next if t_next is not None else mi.Vector3f(dr.inf)
-        self.dt = dt if dt is not None else mi.Vector3f(dr.inf)
-        self.step = step if step is not None else mi.Vector3i(0)
+    _defaults = {"t_next": dr.inf, "dt": dr.inf}
 
 
 def start(media, m, ray: mi.Ray3f, t_max, active) -> MajorantIterator:
