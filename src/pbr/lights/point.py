@@ -181,12 +181,18 @@ class DeltaPositionLight(LightType):
         narrower emission profile (``spot``) override this with a better density."""
         d = mi.warp.square_to_uniform_sphere(u_dir)
         p = gather3(mi.Point3f, self.pos, idx, active)
+        I, ok = self._intensity_along(idx, p, d, u_pos, wl, active)
+        return LeSample(o=p, d=d, L=I, pdf_pos=mi.Float(1.0),
+                        pdf_dir=dr.select(ok, UNIFORM_SPHERE_PDF, 0.0), delta_pos=mi.Bool(True))
+
+    def _intensity_along(self, idx, p, d, u_pos, wl, active):
+        """(intensity leaving the light at ``p`` along unit ``d``, lanes where it is
+        non-zero): what ``sample_Li`` delivers at distance 1, times that distance^2
+        (exactly, so the light's falloff conventions are not restated here)."""
         ref = _Ref(p + d)
         ls = self.sample_Li(idx, ref, u_pos, wl, active)
         ok = active & (ls.pdf > 0)
-        I = ls.L * dr.squared_norm(ls.p - ref.p)
-        return LeSample(o=p, d=d, L=dr.select(ok, I, 0.0), pdf_pos=mi.Float(1.0),
-                        pdf_dir=dr.select(ok, UNIFORM_SPHERE_PDF, 0.0), delta_pos=mi.Bool(True))
+        return dr.select(ok, ls.L * dr.squared_norm(ls.p - ref.p), 0.0), ok
 
     def pdf_Le(self, idx, p, n, d, active):
         """(1: the delta in position, as ``sample_Le`` reports it; density of ``d``)."""

@@ -22,7 +22,7 @@ import numpy as np
 from ..textures import load_spectrum
 from .base import LightSample, LeSample
 from .point import (DeltaPositionLight, load_constant_emission, power_factor, light_frame, spatially_varying,
-                    mat_rows, apply_rows, point_bounds, max_value, luminance, gather3, _Ref)
+                    mat_rows, apply_rows, point_bounds, max_value, luminance, gather3)
 
 
 def spot_solid_angle(cutoff_rad: float, beam_rad: float) -> float:
@@ -122,11 +122,8 @@ class SpotLight(DeltaPositionLight):
         fwd = [gather3(mi.Vector3f, row, idx, active) for row in self.fwd_rows()]
         d = dr.normalize(mi.Vector3f(dr.dot(fwd[0], local), dr.dot(fwd[1], local), dr.dot(fwd[2], local)))
         p = gather3(mi.Point3f, self.pos, idx, active)
-        ref = _Ref(p + d)
-        ls = self.sample_Li(idx, ref, u_pos, wl, active)
-        ok = active & (ls.pdf > 0)
-        I = ls.L * dr.squared_norm(ls.p - ref.p)
-        return LeSample(o=p, d=d, L=dr.select(ok, I, 0.0), pdf_pos=mi.Float(1.0),
+        I, _ = self._intensity_along(idx, p, d, u_pos, wl, active)
+        return LeSample(o=p, d=d, L=I, pdf_pos=mi.Float(1.0),
                         pdf_dir=dr.select(active, mi.warp.square_to_uniform_cone_pdf(local, cos_c), 0.0),
                         delta_pos=mi.Bool(True))
 
