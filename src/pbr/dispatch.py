@@ -53,7 +53,8 @@ def _select(mask, a, b):
     """``dr.select`` over a result tree (tuples, Dr.Jit structs, arrays); ``b = None``
     selects zeros (what ``dr.switch`` gives inactive lanes)."""
     if isinstance(a, tuple):
-        return type(a)(_select(mask, x, None if b is None else y) for x, y in zip(a, b or a))
+        others = b if b is not None else (None,) * len(a)
+        return type(a)(_select(mask, x, y) for x, y in zip(a, others))
     fields = getattr(type(a), "DRJIT_STRUCT", None)
     if fields:
         out = type(a).__new__(type(a))

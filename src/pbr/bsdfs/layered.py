@@ -260,6 +260,10 @@ class _Params:
 
 class _Layered(BSDFType):
     flags = REFLECTION | DIFFUSE | GLOSSY | SPECULAR
+    # The random walks are symbolic loops inside each path vertex. Dr.Jit 1.5 reverse-
+    # differentiates a loop only with a trajectory bound (max_iterations), and with one it
+    # generated invalid LLVM IR here; forward mode works.
+    reverse_differentiable = False
     _prefix = ""          # parameter prefix of the coating ("interface." for coatedconductor)
 
     # -- parsing ---------------------------------------------------------------------
