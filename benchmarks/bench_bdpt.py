@@ -53,18 +53,7 @@ def scenes(res):
     d["pane"] = {"type": "cube", "to_world": T().translate([0.0, 0.96, 0.01]).scale([0.3, 0.008, 0.26]),
                  "bsdf": {"type": "dielectric", "int_ior": 1.5}}
     out["covered"] = d
-    out["caustic"] = {
-        "type": "scene",
-        "sensor": {"type": "perspective", "fov": 40.0,
-                   "to_world": T().look_at(origin=[0, 0.6, 3.0], target=[0, -0.8, 0], up=[0, 1, 0]),
-                   "film": {"type": "hdrfilm", "width": res, "height": res}},
-        "floor": {"type": "rectangle", "to_world": T().translate([0, -1, 0]).rotate([1, 0, 0], -90).scale(2.0),
-                  "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.8, 0.8, 0.8]}}},
-        "glass": {"type": "sphere", "center": [0.0, -0.6, 0.0], "radius": 0.4,
-                  "bsdf": {"type": "dielectric", "int_ior": 1.5}},
-        "light": {"type": "rectangle", "to_world": T().translate([0.0, 1.2, 0.0]).rotate([1, 0, 0], 90).scale(0.2),
-                  "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [30.0, 30.0, 30.0]}}},
-    }
+    out["caustic"] = pbr.scenes.glass_caustic(res)
     out["cornell"] = pbr.cornell_box(res, 16)
     for d in out.values():
         d["sensor"]["film"]["rfilter"] = {"type": "box"}

@@ -33,24 +33,10 @@ def cornell(integrator, max_depth, scale=1, res=RES):
 
 
 def caustic(integrator, max_depth, scale=1):
-    """A glass sphere (IOR 1.5) on a diffuse floor under a 0.4 x 0.4 area light 1.8 above
-    it, out of the camera's view. The caustic under the sphere needs max_depth >= 4
-    (camera - floor - glass - glass - light)."""
-    T = mi.ScalarTransform4f
-    res = 16 * scale
-    return {
-        "type": "scene",
-        "integrator": {"type": integrator, "max_depth": max_depth},
-        "sensor": {"type": "perspective", "fov": 40.0,
-                   "to_world": T().look_at(origin=[0, 0.6, 3.0], target=[0, -0.8, 0], up=[0, 1, 0]),
-                   "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}}},
-        "floor": {"type": "rectangle", "to_world": T().translate([0, -1, 0]).rotate([1, 0, 0], -90).scale(2.0),
-                  "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.8, 0.8, 0.8]}}},
-        "glass": {"type": "sphere", "center": [0.0, -0.6, 0.0], "radius": 0.4,
-                  "bsdf": {"type": "dielectric", "int_ior": 1.5}},
-        "light": {"type": "rectangle", "to_world": T().translate([0.0, 1.2, 0.0]).rotate([1, 0, 0], 90).scale(0.2),
-                  "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [30.0, 30.0, 30.0]}}},
-    }
+    """pbr.scenes.glass_caustic: the caustic under the sphere needs max_depth >= 4."""
+    d = pbr.scenes.glass_caustic(16 * scale)
+    d["integrator"] = {"type": integrator, "max_depth": max_depth}
+    return d
 
 
 def render_fn(d):

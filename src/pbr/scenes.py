@@ -50,6 +50,30 @@ def cornell_box(resolution: int = 256, spp: int = 64) -> dict:
     }
 
 
+def glass_caustic(resolution: int = 64, spp: int = 64) -> dict:
+    """A glass sphere (IOR 1.5) on a diffuse floor under a 0.4 x 0.4 area light 1.8 above
+    it, out of the camera's view: light reaches the floor under the sphere only through
+    the glass (a caustic; it needs max_depth >= 4: camera - floor - glass - glass - light).
+    A Mitsuba-style scene dict with a box filter."""
+    from . import backend
+    backend.ensure()
+    T = mi.ScalarTransform4f
+    return {
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 40.0,
+                   "to_world": T().look_at(origin=[0, 0.6, 3.0], target=[0, -0.8, 0], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": resolution, "height": resolution,
+                            "rfilter": {"type": "box"}},
+                   "sampler": {"type": "independent", "sample_count": spp}},
+        "floor": {"type": "rectangle", "to_world": T().translate([0, -1, 0]).rotate([1, 0, 0], -90).scale(2.0),
+                  "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.8, 0.8, 0.8]}}},
+        "glass": {"type": "sphere", "center": [0.0, -0.6, 0.0], "radius": 0.4,
+                  "bsdf": {"type": "dielectric", "int_ior": 1.5}},
+        "light": {"type": "rectangle", "to_world": T().translate([0.0, 1.2, 0.0]).rotate([1, 0, 0], 90).scale(0.2),
+                  "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [30.0, 30.0, 30.0]}}},
+    }
+
+
 # The gallery's data files (written by scenes/data/make_gallery_data.py). The dict holds
 # absolute paths; ``to_xml(d, base_dir=...)`` writes them relative to the scene file.
 GALLERY_DATA = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
