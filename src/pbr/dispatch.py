@@ -1,4 +1,4 @@
-"""Calling one of several families (BSDF, light) per lane.
+"""Calling one of several families (BSDF, light) per lane, and loops within one call.
 
 Normally a ``dr.switch``: one symbolic call, each lane runs its family's code. Forward-
 mode differentiation is the exception: Dr.Jit 1.5 cannot forward-propagate through two
@@ -62,3 +62,19 @@ def _select(mask, a, b):
             setattr(out, k, _select(mask, getattr(a, k), None if b is None else getattr(b, k)))
         return out
     return dr.select(mask, a, type(a)(0) if b is None else b)
+
+
+def loop(state, cond, body, unroll: int, label: str):
+    """``dr.while_loop(state, cond, body)``; with ``unroll`` > 0 the same loop as that
+    many masked copies of its body (a bound on its trip count), for a loop nested in the
+    path loop that carries gradients. Dr.Jit 1.5 reverse-differentiates a symbolic loop
+    only with a trajectory bound (``max_iterations``), and with one generated invalid
+    LLVM IR for such loops; and its forward mode does not carry derivatives from outside
+    a nested symbolic loop into it (they came out 0)."""
+    if not unroll:
+        return dr.while_loop(state, cond, body, label=label)
+    state = tuple(state)
+    for _ in range(unroll):
+        on = cond(*state)
+        state = tuple(dr.select(on, a, b) for a, b in zip(body(*state), state))
+    return state

@@ -30,12 +30,6 @@ class _RenderOp(dr.CustomOp):
         self.set_grad_out(img)
 
     def backward(self):
-        blocked = sorted(n for n, f in self.scene.bsdfs.families.items() if not f.reverse_differentiable)
-        if blocked:
-            raise NotImplementedError(
-                f"pbr.render: reverse-mode gradients of scenes with layered BSDFs ({', '.join(blocked)}) "
-                f"are not supported (Dr.Jit 1.5 cannot differentiate their random-walk loops in reverse); "
-                f"use forward mode (dr.forward) or remove them")
         self.integrator.render_backward(self.scene, self.grad_out(), sensor=self.sensor,
                                         seed=self.seed[1], spp=self.spp[1])
 

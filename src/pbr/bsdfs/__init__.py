@@ -180,6 +180,13 @@ class BSDFSet:
             smooth[i] = smooth[a] or smooth[b]
         self.smooth_of = mi.Bool(smooth)
         self.all_smooth = all(smooth)
+        # Entries whose sample weight is a random estimate (see BSDFType.stochastic).
+        stoch = [self.families[t].stochastic or (b != NO_BACK and self.families[self.entries[b][0]].stochastic)
+                 for t, _, b, _ in self.entries]
+        for i, (a, b, _) in self.blend_of.items():
+            stoch[i] = stoch[a] or stoch[b]
+        self.stochastic_of = mi.Bool(stoch)
+        self.any_stochastic = any(stoch)
         self.masked = any(o != NO_BACK for _, _, _, o in self.entries)
         # Pure ``null`` entries: index-matched medium boundaries, skipped by volpath.
         null = [t == "null" and i not in self.blend_of for i, (t, _, _, _) in enumerate(self.entries)]
@@ -191,6 +198,13 @@ class BSDFSet:
         if self.all_smooth:
             return mi.Bool(True)
         return dr.gather(mi.Bool, self.smooth_of, bsdf_id, active)
+
+    def stochastic(self, bsdf_id, active):
+        """True where the entry's sample weight is a random estimate that ``eval`` does not
+        reproduce (a layered BSDF): gradients differentiate the sample's own weight."""
+        if not self.any_stochastic:
+            return mi.Bool(False)
+        return dr.gather(mi.Bool, self.stochastic_of, bsdf_id, active)
 
     def is_null(self, bsdf_id, active):
         """True where the entry is a pure ``null`` BSDF (light passes unchanged)."""

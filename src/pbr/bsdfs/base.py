@@ -50,7 +50,9 @@ class BSDFType:
 
     name = ""
     flags = 0
-    reverse_differentiable = True   # reverse-mode AD through its code works (see _Layered)
+    # Whether ``sample``'s weight is a random estimate that ``eval`` does not reproduce (a
+    # layered BSDF's walk): the path replay then differentiates the sample's own weight.
+    stochastic = False
 
     def __init__(self):
         self.instances: list = []

@@ -32,7 +32,13 @@ scales radiance by 1 / eta^2 and the way out by eta^2.
 
 Differences from pbrt-v4: Smith masking is the separable G1 G1 (pbr's microfacet module,
 as Mitsuba) rather than pbrt's height-correlated form; the anisotropic roughness axes
-are the shading frame's. Gradients through the random walk are not validated.
+are the shading frame's.
+
+Gradients (pbr's own; docs/layered.md): where a parameter carries gradients the walks
+sample with detached parameters and their weights carry the derivatives
+(:func:`_reweighted`, :func:`_free_flight`), their loops are unrolled
+(``dispatch.loop``), and the family is ``stochastic``: the path replay differentiates
+the sampled walk's weight instead of a second, independent estimate from ``eval``.
 """
 
 from __future__ import annotations
@@ -43,7 +49,9 @@ import os
 import drjit as dr
 import mitsuba as mi
 
-from ..phase import hg, hg_sample
+from .. import dispatch
+from ..phase import hg, hg_pdf, hg_sample
+from ..scene.params import ParamOwner, param_table
 from ..sampling import cosine_hemisphere_pdf, power_heuristic, square_to_cosine_hemisphere
 from ..spectrum import read_spd
 from ..textures import add_tabulated, load_spectrum
@@ -92,43 +100,6 @@ def _tr(dz, w):
     return dr.select(dr.abs(dz) <= _FLT_MIN, 1.0, dr.exp(-dr.abs(dz / w.z)))
 
 
-def _free_flight(cur, z, w, beta, thick, g, in_medium, u_dz, u, medium: bool):
-    """One step of a layered random walk from height ``z`` along ``w`` (lanes ``cur``).
-
-    Without a medium (or where ``in_medium`` is false) the walk crosses the slab to the
-    other interface, attenuated by its transmittance. In a medium an exponential free
-    flight either stops inside (``inside``; ``scat`` where the presampled HG direction
-    ``ps_w`` is usable) or reaches an interface. A zero free flight (u = 0) is neither: it
-    is drawn again at the next event (pbrt-v4 fails it, a 2^-24 chance per event and an
-    energy loss). Returns (cur: lanes now at an interface, z, beta, zp: the flight's end,
-    inside, scat, ps_w, ps_pdf)."""
-    flip_z = dr.select(z == thick, 0.0, thick)
-    if not medium:
-        z = dr.select(cur, flip_z, z)
-        beta = dr.select(cur, beta * _tr(thick, w), beta)
-        return cur, z, beta, z, mi.Bool(False), mi.Bool(False), mi.Vector3f(w), mi.Float(0.0)
-    med = cur & in_medium
-    dz = -dr.log(1.0 - u_dz) * dr.abs(w.z)
-    zp = dr.select(w.z > 0, z + dz, z - dz)
-    same = med & (zp == z)
-    inside = med & ~same & (zp > 0) & (zp < thick)
-    ps_w, ps_pdf = hg_sample(-w, g, u)
-    scat = inside & (ps_pdf > 0) & (ps_w.z != 0)
-    cur = cur & ~(same | inside)
-    z = dr.select(cur, dr.select(med, dr.clip(zp, 0.0, thick), flip_z), z)
-    beta = dr.select(cur & ~med, beta * _tr(thick, w), beta)
-    return cur, z, beta, zp, inside, scat, ps_w, ps_pdf
-
-
-def _kind(kinds):
-    kinds = set(kinds)
-    return kinds.pop() if len(kinds) == 1 else MIXED
-
-
-def _number(v) -> bool:
-    return isinstance(v, numbers.Real) and not isinstance(v, bool)
-
-
 class _Sample:
     """An interface sample: direction, f |cos| / pdf, pdf, validity, reflected mask."""
 
@@ -139,6 +110,86 @@ class _Sample:
 def _select(mask, a: _Sample, b: _Sample) -> _Sample:
     return _Sample(*(dr.select(mask, x, y) for x, y in
                      zip((a.w, a.weight, a.pdf, a.ok, a.refl), (b.w, b.weight, b.pdf, b.ok, b.refl))))
+
+
+class _Flight:
+    """The outcome of one step of a layered random walk (see :func:`_free_flight`)."""
+
+    def __init__(self, cur, z, beta, zp, dz_top, inside, ps: _Sample):
+        self.cur, self.z, self.beta, self.zp, self.dz_top, self.inside, self.ps = cur, z, beta, zp, dz_top, inside, ps
+
+
+def _free_flight(cur, z, w, beta, thick, g, in_medium, u_dz, u, medium: bool, ad: bool) -> _Flight:
+    """One step of a layered random walk from height ``z`` along ``w`` (lanes ``cur``).
+
+    Without a medium (or where ``in_medium`` is false) the walk crosses the slab to the
+    other interface, attenuated by its transmittance. In a medium an exponential free
+    flight either stops inside (``inside``; the presampled HG direction ``ps`` scatters
+    where ``ps.ok``) or reaches an interface. A zero free flight (u = 0) is neither: it
+    is drawn again at the next event (pbrt-v4 fails it, a 2^-24 chance per event and an
+    energy loss). Returns the lanes now at an interface (``cur``), their height ``z``,
+    ``beta``, the flight's end ``zp`` and its signed height below the top ``dz_top``.
+
+    With ``ad`` (reverse mode) the heights are those of the detached thickness (the walk
+    is fixed in units of the slab's height, as a path replay fixes its samples), and the
+    weights carry the derivatives: the slab is then one of unit height and extinction
+    ``thickness``, whose flight densities T exp(-T s) (collision) and exp(-T s) (escape)
+    are divided by their detached values; ``dz_top`` scales with the thickness."""
+    thick0 = dr.detach(thick) if ad else thick
+    flip_z = dr.select(z == thick0, 0.0, thick0)
+    if not medium:
+        z = dr.select(cur, flip_z, z)
+        beta = dr.select(cur, beta * _tr(thick, w), beta)
+        no = mi.Bool(False)
+        return _Flight(cur, z, beta, z, z - thick, no, _Sample(mi.Vector3f(w), mi.Float(1.0), mi.Float(0.0), no, no))
+    med = cur & in_medium
+    tau = -dr.log(1.0 - u_dz)
+    dz = tau * dr.abs(w.z)
+    zp = dr.select(w.z > 0, z + dz, z - dz)
+    same = med & (zp == z)
+    inside = med & ~same & (zp > 0) & (zp < thick0)
+    ps = _hg_sample(-w, g, u, ad)
+    ps.ok = inside & (ps.pdf > 0) & (ps.w.z != 0)
+    cur = cur & ~(same | inside)
+    z_new = dr.select(cur, dr.select(med, dr.clip(zp, 0.0, thick0), flip_z), z)
+    beta = dr.select(cur & ~med, beta * _tr(thick, w), beta)
+    dz_top = zp - thick
+    if ad:
+        r = thick / thick0                                  # 1, with d/d thickness
+        escape = dr.exp((1.0 - r) * dr.abs(z_new - z) / dr.abs(w.z))
+        beta = dr.select(inside, beta * (r * dr.exp((1.0 - r) * tau)), dr.select(cur & med, beta * escape, beta))
+        dz_top = (zp - thick0) * r
+    return _Flight(cur, z_new, beta, zp, dz_top, inside, ps)
+
+
+def _reweighted(s: _Sample, f) -> _Sample:
+    """``s``, drawn with detached parameters, with a weight whose derivative is that of
+    ``f``, the attached f |cos| (or phase function) at its direction, over its detached
+    density. Reverse mode differentiates the walks this way, as a path replay does its
+    path: with the sampling fixed and the integrand moving (attached sampling would move
+    directions whose effect further along is not differentiated)."""
+    ratio = type(f)(dr.select(f != 0, f / dr.detach(f), 0.0))
+    s.weight = type(s.weight)(s.weight * dr.replace_grad(type(f)(1.0), ratio))
+    return s
+
+
+def _hg_sample(wo, g, u, ad: bool) -> _Sample:
+    """Henyey-Greenstein sample for a walk arriving along ``-wo``; weight 1."""
+    if ad:
+        with dr.suspend_grad():
+            s = _hg_sample(wo, g, u, False)
+        return _reweighted(s, hg_pdf(wo, s.w, g))
+    w, pdf = hg_sample(wo, g, u)
+    return _Sample(w, mi.Float(1.0), pdf, mi.Bool(True), mi.Bool(False))
+
+
+def _kind(kinds):
+    kinds = set(kinds)
+    return kinds.pop() if len(kinds) == 1 else MIXED
+
+
+def _number(v) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, bool)
 
 
 # ---------------------------------------------------------------- the interfaces
@@ -157,8 +208,21 @@ class _Top:
         if self.rough:
             self.md = Microfacet(GGX, au, av, True)
 
-    def sample(self, wo, uc, u, lobes=BOTH) -> _Sample:
-        """Sample from ``wo``; the weight is for radiance transport."""
+    def sample(self, wo, uc, u, lobes=BOTH, ad=False) -> _Sample:
+        """Sample from ``wo``; the weight is for radiance transport. ``ad``: see
+        :func:`_reweighted` (a smooth lane's value is its lobe's weight times choice
+        probability: the Fresnel term)."""
+        if ad:
+            with dr.suspend_grad():
+                s = self.sample(wo, uc, u, lobes)
+            f = None
+            if self.kind != ROUGH:
+                _, pdf, weight, _, _, _ = smooth_dielectric_sample(wo, self.eta, uc, lobes)
+                f = weight * pdf
+            if self.rough:
+                fr = self.eval_pdf(wo, s.w, lobes)[0]
+                f = fr if f is None else dr.select(self.smooth, f, fr)
+            return _reweighted(s, f)
         out = None
         if self.kind != ROUGH:
             w, pdf, weight, refl, _, _ = smooth_dielectric_sample(wo, self.eta, uc, lobes)
@@ -194,7 +258,8 @@ class _DiffuseBase:
         self.r = r
         self.specular = mi.Bool(False)
 
-    def sample(self, wo, uc, u) -> _Sample:
+    def sample(self, wo, uc, u, ad=False) -> _Sample:
+        # The direction does not depend on the parameters: no reweighting for ``ad``.
         w = square_to_cosine_hemisphere(u)
         ok = (wo.z > 0) & (w.z > 0)
         return _Sample(w, mi.Spectrum(dr.select(ok, self.r, 0.0)), cosine_hemisphere_pdf(w), ok, mi.Bool(True))
@@ -217,7 +282,14 @@ class _ConductorBase:
         if self.rough:
             self.md = Microfacet(GGX, au, av, True)
 
-    def sample(self, wo, uc, u) -> _Sample:
+    def sample(self, wo, uc, u, ad=False) -> _Sample:
+        if ad and self.rough:       # see _reweighted; a mirror's direction does not move
+            with dr.suspend_grad():
+                s = self.sample(wo, uc, u)
+            f = self.eval_pdf(wo, s.w)[0]
+            if self.kind != ROUGH:
+                f = mi.Spectrum(dr.select(self.specular, fresnel_conductor(wo.z, self.eta, self.k), f))
+            return _reweighted(s, f)
         out = None
         if self.kind != ROUGH:
             ok = wo.z > 0
@@ -251,19 +323,21 @@ class _ConductorBase:
 class _Params:
     """Per-lane parameters of one query."""
 
-    def __init__(self, top, base, thick, albedo, g, medium, maxdepth, nsamples, terminate):
+    def __init__(self, top, base, thick, albedo, g, medium, maxdepth, nsamples, terminate, ad, unroll):
         self.top, self.base, self.thick, self.albedo, self.g = top, base, thick, albedo, g
         self.medium, self.maxdepth, self.nsamples, self.terminate = medium, maxdepth, nsamples, terminate
+        # ad: a parameter carries gradients, so the walks sample with detached parameters
+        # (see _reweighted) and their loops are unrolled (see dispatch.loop) to these trip
+        # counts (events, walks); else (0, 0): symbolic loops.
+        self.ad = ad
+        self.unroll_depth, self.unroll_samples = unroll
 
 
 # ---------------------------------------------------------------- the BSDF family
 
 class _Layered(BSDFType):
     flags = REFLECTION | DIFFUSE | GLOSSY | SPECULAR
-    # The random walks are symbolic loops inside each path vertex. Dr.Jit 1.5 reverse-
-    # differentiates a loop only with a trajectory bound (max_iterations), and with one it
-    # generated invalid LLVM IR here; forward mode works.
-    reverse_differentiable = False
+    stochastic = True
     _prefix = ""          # parameter prefix of the coating ("interface." for coatedconductor)
 
     # -- parsing ---------------------------------------------------------------------
@@ -296,6 +370,9 @@ class _Layered(BSDFType):
         if eta is not None and eta == 0:
             eta = 1.0          # pbrt-v4: an IOR of 0 means index-matched
         inst["eta"], inst["eta_slot"] = (1.0 if eta is None else eta), (_NONE if slot is None else slot)
+        # A constant IOR is a scene parameter (``<bsdf>.eta``, ``<bsdf>.interface.eta``);
+        # a spectral one is a texture, a parameter of its own.
+        inst["owner"] = ParamOwner(props.path, **{p + "eta": mi.Float(inst["eta"])}) if slot is None else None
         (inst["top_u"], inst["top_v"]), kind = self._roughness(loader, props, p, remap)
         if slot is not None:
             kind = MIXED       # a wavelength-dependent IOR may be 1
@@ -317,7 +394,8 @@ class _Layered(BSDFType):
     def build(self) -> None:
         I = self.instances  # noqa: E741
         u32 = lambda k: mi.UInt32([i[k] for i in I])  # noqa: E731
-        self.eta = mi.Float([i["eta"] for i in I])
+        p = self._prefix + "eta"
+        self.eta = param_table([i["owner"].params[p] if i["owner"] else i["eta"] for i in I])
         self.dispersive = any(i["eta_slot"] != _NONE for i in I)
         self.eta_slot = u32("eta_slot")
         self.remap = mi.Bool([i["remap"] for i in I])
@@ -326,6 +404,11 @@ class _Layered(BSDFType):
         self.thickness, self.albedo, self.g = u32("thickness"), u32("albedo"), u32("g")
         self.medium = any(i["medium"] for i in I)
         self.maxdepth, self.nsamples = u32("maxdepth"), u32("nsamples")
+        self.maxdepth_max = max(i["maxdepth"] for i in I)
+        self.nsamples_max = max(i["nsamples"] for i in I)
+
+    def param_owners(self) -> list:
+        return [i["owner"] for i in self.instances if i["owner"] is not None]
 
     # -- per-hit parameters ---------------------------------------------------------
     def _tex(self, ctx, idx, active):
@@ -357,8 +440,11 @@ class _Layered(BSDFType):
         else:
             albedo, g, medium = mi.Spectrum(0.0), mi.Float(0.0), mi.Bool(False)
         base = self._base(ev, idx, eta, active)
+        parts = (top, getattr(top, "md", None), base, getattr(base, "md", None))
+        ad = dr.grad_enabled(thick, albedo, g, *(vars(p) for p in parts if p is not None))
+        unroll = (self.maxdepth_max, self.nsamples_max) if ad else (0, 0)
         return _Params(top, base, thick, albedo, g, medium, dr.gather(mi.UInt32, self.maxdepth, idx, active),
-                       dr.gather(mi.UInt32, self.nsamples, idx, active), terminate)
+                       dr.gather(mi.UInt32, self.nsamples, idx, active), terminate, ad, unroll)
 
     # -- the three estimators -------------------------------------------------------
     def _f(self, P: _Params, wv, wl, active):
@@ -366,7 +452,7 @@ class _Layered(BSDFType):
         (both above the surface)."""
         top, base = P.top, P.base
         thick, albedo, g = P.thick, P.albedo, P.g
-        medium = self.medium
+        medium, ad = self.medium, P.ad
         f_top = top.eval_pdf(wv, wl)[0]
         rng = _rng((wv.x, wv.y, wv.z), (wl.x, wl.y, wl.z))
         zero = mi.Spectrum(0.0)
@@ -376,9 +462,9 @@ class _Layered(BSDFType):
             # Into the coating from the camera side, and (the virtual light) from the
             # light side; the latter for importance transport (the adjoint: undo 1/eta^2).
             wos = top.sample(wv, rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32()),
-                             TRANSMISSION)
+                             TRANSMISSION, ad)
             wis = top.sample(wl, rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32()),
-                             TRANSMISSION)
+                             TRANSMISSION, ad)
             v = wis.w
             ok = on & wos.ok & wis.ok & (wos.w.z != 0) & (v.z != 0)
             f_wis = wis.weight * (top.eta * top.eta) / dr.abs(v.z)      # f / pdf of the light-side sample
@@ -390,12 +476,11 @@ class _Layered(BSDFType):
                 # Russian roulette.
                 mb = dr.max(beta)
                 rr = alive & (depth > 3) & (mb < 0.25)
-                q = dr.maximum(0.0, 1.0 - mb)
+                q = dr.maximum(0.0, 1.0 - dr.detach(mb))   # a probability: no derivative
                 alive = alive & (~(rr & (u_rr < q)))
                 beta = dr.select(rr, beta / (1.0 - q), beta)
-                cur = mi.Bool(alive)
-                cur, z, beta, zp, inside, scat, ps_w, ps_pdf = _free_flight(
-                    cur, z, w, beta, thick, g, P.medium, u_dz, u, medium)
+                fl = _free_flight(mi.Bool(alive), z, w, beta, thick, g, P.medium, u_dz, u, medium, ad)
+                cur, z, beta, inside, scat = fl.cur, fl.z, fl.beta, fl.inside, fl.ps.ok
                 at_top = cur & (z == thick)
                 at_bot = cur & (z != thick)
 
@@ -408,23 +493,24 @@ class _Layered(BSDFType):
                     ph = hg(dr.dot(w, v), g)
                     val = dr.select(inside, albedo * ph, val)
                     p_conn = dr.select(inside, ph, p_conn)
-                    dzz = dr.select(inside, zp - thick, dzz)
+                    dzz = dr.select(inside, fl.dz_top, dzz)
                     conn = conn | inside
-                wt = dr.select(top.smooth, 1.0, power_heuristic(pdf_wis, p_conn))
+                # MIS weights are detached (their derivatives cancel between strategies).
+                wt = dr.select(top.smooth, 1.0, power_heuristic(pdf_wis, dr.detach(p_conn)))
                 acc = acc + dr.select(conn, beta * val * (wt * _tr(dzz, v) * f_wis), zero)
 
                 # Continue: reflect inside the top, at the base, or scatter in the medium.
-                st = top.sample(-w, uc, u, REFLECTION)
-                sb = base.sample(-w, uc, u)
+                st = top.sample(-w, uc, u, REFLECTION, ad)
+                sb = base.sample(-w, uc, u, ad)
                 ok_t, ok_b = at_top & st.ok, at_bot & sb.ok
                 new_w = dr.select(at_top, st.w, sb.w)
                 new_beta = beta * dr.select(at_top, mi.Spectrum(st.weight), sb.weight)
                 new_pdf = sb.pdf
                 cont = ok_t | ok_b
                 if medium:
-                    new_w = dr.select(scat, ps_w, new_w)
-                    new_beta = dr.select(scat, beta * albedo, new_beta)
-                    new_pdf = dr.select(scat, ps_pdf, new_pdf)
+                    new_w = dr.select(scat, fl.ps.w, new_w)
+                    new_beta = dr.select(scat, beta * albedo * fl.ps.weight, new_beta)
+                    new_pdf = dr.select(scat, fl.ps.pdf, new_pdf)
                     cont = cont | scat
 
                 # Connection along the new direction where it leaves through a rough top
@@ -434,7 +520,7 @@ class _Layered(BSDFType):
                     dzz2 = mi.Float(thick)
                     if medium:
                         leave = leave | (scat & (new_w.z > 0))
-                        dzz2 = dr.select(scat, zp - thick, dzz2)
+                        dzz2 = dr.select(scat, fl.dz_top, dzz2)
                     leave = leave & ~top.smooth
                     # Evaluated from the light side: pe is the density with which the
                     # light-side sample would have produced this direction (the weights
@@ -443,25 +529,25 @@ class _Layered(BSDFType):
                     # gives the value for leaving toward wl.
                     fr, pe = top.eval_pdf(wl, -new_w, TRANSMISSION)
                     fe = fr * (top.eta * top.eta) * dr.abs(wl.z) / dr.abs(new_w.z)
-                    wt2 = dr.select(ok_b & base.specular, 1.0, power_heuristic(new_pdf, pe))
+                    wt2 = dr.select(ok_b & base.specular, 1.0, power_heuristic(new_pdf, dr.detach(pe)))
                     acc_cos = acc_cos + dr.select(leave & (fe > 0), new_beta * (_tr(dzz2, new_w) * fe * wt2), zero)
 
                 alive = alive & (~((at_top & ~st.ok) | (at_bot & ~sb.ok)))
                 beta = dr.select(cont, new_beta, beta)
                 w = dr.select(cont, new_w, w)
                 if medium:
-                    z = dr.select(scat, zp, z)
+                    z = dr.select(scat, fl.zp, z)
                 return depth + 1, alive, beta, w, z, acc, acc_cos, rng
 
             state = (mi.UInt32(0), mi.Bool(ok), mi.Spectrum(wos.weight), mi.Vector3f(wos.w),
-                     mi.Float(thick), acc, acc_cos, rng)
-            _, _, _, _, _, acc, acc_cos, rng = dr.while_loop(
-                state, lambda depth, alive, *_: alive & (depth < P.maxdepth), event, label="layered_f_walk")
+                     mi.Float(dr.detach(thick) if ad else thick), acc, acc_cos, rng)
+            _, _, _, _, _, acc, acc_cos, rng = dispatch.loop(
+                state, lambda depth, alive, *_: alive & (depth < P.maxdepth), event, P.unroll_depth, "layered_f_walk")
             return s + 1, acc, acc_cos, rng
 
-        _, acc, acc_cos, _ = dr.while_loop((mi.UInt32(0), mi.Spectrum(0.0), mi.Spectrum(0.0), rng),
-                                           lambda s, *_: active & (s < P.nsamples), walk,
-                                           label="layered_f_samples")
+        _, acc, acc_cos, _ = dispatch.loop((mi.UInt32(0), mi.Spectrum(0.0), mi.Spectrum(0.0), rng),
+                                           lambda s, *_: active & (s < P.nsamples), walk, P.unroll_samples,
+                                           "layered_f_samples")
         inv_n = dr.rcp(mi.Float(P.nsamples))
         return f_top + (acc * dr.abs(wl.z) + acc_cos) * inv_n
 
@@ -487,8 +573,8 @@ class _Layered(BSDFType):
                 ok = ok & (top.smooth | rs.ok)
             return s + 1, acc + dr.select(ok, term, 0.0), rng
 
-        _, acc, _ = dr.while_loop((mi.UInt32(0), mi.Float(0.0), rng), lambda s, *_: active & (s < P.nsamples),
-                                  body, label="layered_pdf")
+        _, acc, _ = dispatch.loop((mi.UInt32(0), mi.Float(0.0), rng), lambda s, *_: active & (s < P.nsamples),
+                                  body, P.unroll_samples, "layered_pdf")
         est = p_top + acc / mi.Float(P.nsamples)
         return dr.lerp(1.0 / (4.0 * dr.pi), est, 0.9)
 
@@ -496,8 +582,8 @@ class _Layered(BSDFType):
         """pbrt-v4's LayeredBxDF::Sample_f from view ``wv`` (above the surface)."""
         top, base = P.top, P.base
         thick, albedo, g = P.thick, P.albedo, P.g
-        medium = self.medium
-        s0 = top.sample(wv, uc, u)
+        medium, ad = self.medium, P.ad
+        s0 = top.sample(wv, uc, u, BOTH, ad)
         ok0 = active & s0.ok & (s0.w.z != 0)
         refl0 = s0.refl
         rng = _rng((wv.x, wv.y, wv.z), (uc, u.x, u.y))
@@ -507,19 +593,18 @@ class _Layered(BSDFType):
             u = mi.Point2f(rng.next_float32(), rng.next_float32())
             mb = dr.max(beta)
             rr = alive & (depth > 3) & (mb < 0.25)
-            q = dr.maximum(0.0, 1.0 - mb)
+            q = dr.maximum(0.0, 1.0 - dr.detach(mb))
             alive = alive & (~(rr & (u_rr < q)) & (w.z != 0))
             beta = dr.select(rr, beta / (1.0 - q), beta)
             pdf = dr.select(rr, pdf * (1.0 - q), pdf)
-            cur = mi.Bool(alive)
-            cur, z, beta, zp, inside, scat, ps_w, ps_pdf = _free_flight(
-                cur, z, w, beta, thick, g, P.medium, u_dz, u, medium)
+            fl = _free_flight(mi.Bool(alive), z, w, beta, thick, g, P.medium, u_dz, u, medium, ad)
+            cur, z, beta, scat = fl.cur, fl.z, fl.beta, fl.ps.ok
             if medium:
-                alive = alive & (~(inside & ~scat))
+                alive = alive & (~(fl.inside & ~scat))
             at_top = cur & (z == thick)
             at_bot = cur & (z != thick)
-            st = top.sample(-w, uc, u)
-            sb = base.sample(-w, uc, u)
+            st = top.sample(-w, uc, u, BOTH, ad)
+            sb = base.sample(-w, uc, u, ad)
             ok_t, ok_b = at_top & st.ok & (st.w.z != 0), at_bot & sb.ok
             alive = alive & (~((at_top & ~ok_t) | (at_bot & ~ok_b)))
             beta = dr.select(ok_t, beta * st.weight, dr.select(ok_b, beta * sb.weight, beta))
@@ -527,26 +612,29 @@ class _Layered(BSDFType):
             spec = spec & (dr.select(ok_t, top.smooth, dr.select(ok_b, base.specular, True)))
             w = dr.select(ok_t, st.w, dr.select(ok_b, sb.w, w))
             if medium:
-                beta = dr.select(scat, beta * albedo, beta)
-                pdf = dr.select(scat, pdf * ps_pdf, pdf)
+                beta = dr.select(scat, beta * albedo * fl.ps.weight, beta)
+                pdf = dr.select(scat, pdf * fl.ps.pdf, pdf)
                 spec = spec & ~scat
-                w = dr.select(scat, ps_w, w)
-                z = dr.select(scat, zp, z)
+                w = dr.select(scat, fl.ps.w, w)
+                z = dr.select(scat, fl.zp, z)
             out = ok_t & ~st.refl
             exited = exited | out
             alive = alive & ~out
             return depth + 1, alive, exited, spec, beta, pdf, w, z, rng
 
         state = (mi.UInt32(0), ok0 & ~refl0, mi.Bool(False), top.smooth & ok0, mi.Spectrum(s0.weight),
-                 mi.Float(s0.pdf), mi.Vector3f(s0.w), mi.Float(thick), rng)
-        _, _, exited, spec, beta, pdf, w, _, _ = dr.while_loop(
-            state, lambda depth, alive, *_: alive & (depth < P.maxdepth), event, label="layered_sample")
+                 mi.Float(s0.pdf), mi.Vector3f(s0.w), mi.Float(dr.detach(thick) if ad else thick), rng)
+        _, _, exited, spec, beta, pdf, w, _, _ = dispatch.loop(
+            state, lambda depth, alive, *_: alive & (depth < P.maxdepth), event, P.unroll_depth, "layered_sample")
         ok = ok0 & (refl0 | exited)
         wo = dr.select(refl0, s0.w, w)
         delta = dr.select(refl0, top.smooth, spec)
         weight = dr.select(refl0, mi.Spectrum(s0.weight), beta)
         path_pdf = dr.select(refl0, s0.pdf, pdf)
-        pdf = dr.select(delta, path_pdf, self._pdf(P, wv, wo, ok & ~delta))
+        # The stochastic density (non-delta) is detached: the path replay differentiates
+        # weight * pdf (BSDFType.stochastic), i.e. the walk's weight alone (with ``ad``
+        # every density is detached and the weights carry the derivatives).
+        pdf = dr.select(delta, path_pdf, dr.detach(self._pdf(P, wv, wo, ok & ~delta)))
         ok = ok & (pdf > 0) & (wo.z > 0)
         return BSDFSample(wo, dr.select(ok, pdf, 0.0), mi.Float(1.0), ok & delta, dr.select(ok, weight, 0.0),
                           P.terminate & active)

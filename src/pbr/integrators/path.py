@@ -109,8 +109,11 @@ class PathIntegrator(SamplingIntegrator):
                 Ld = dr.select(em, beta * f_em * ls.L * (w_em / ls.pdf), 0.0)
                 # A delta lobe cannot be evaluated toward a direction; its attached value
                 # is the sample's weight times the lobe's choice probability (e.g. the
-                # Fresnel reflectance of a smooth dielectric).
-                f_delta = bs.weight * bs.pdf
+                # Fresnel reflectance of a smooth dielectric). A stochastic BSDF's eval
+                # is another random estimate than the sample's weight: there too the
+                # sample's own weight is differentiated (its pdf is detached).
+                f_sampled = bs.weight * bs.pdf
+            replay_sample = bs.delta | bsdfs.stochastic(bsdf_id, active_next)
             bs = dr.detach(bs)
             cont = active_next & (bs.pdf > 0)
 
@@ -127,8 +130,8 @@ class PathIntegrator(SamplingIntegrator):
             else:
                 L = L - Le - Ld
                 with dr.resume_grad():
-                    f_bs, _ = bsdfs.eval_pdf(bsdf_id, ctx, bs.wo, cont & ~bs.delta)
-                    f_bs = dr.select(bs.delta, f_delta, f_bs)
+                    f_bs, _ = bsdfs.eval_pdf(bsdf_id, ctx, bs.wo, cont & ~replay_sample)
+                    f_bs = dr.select(replay_sample, f_sampled, f_bs)
                     f_det = bs.weight * bs.pdf
                     ratio = dr.select(f_det != 0, f_bs * dr.rcp(dr.detach(f_det)), 0.0)
                     Lr = L * dr.replace_grad(mi.Spectrum(1.0), ratio)

@@ -267,6 +267,8 @@ class PRBVolPathIntegrator(_MediumAware):
                     pdf_em = dr.select(sc, f_ph, pdf_em)
                 w_em = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf, dr.detach(pdf_em)))
                 Ld_unocc = dr.select(nee & (ls.pdf > 0), beta * f_em * ls.L * (w_em / ls.pdf), 0.0)
+                f_sampled = bs.weight * bs.pdf     # delta lobes and stochastic BSDFs (see prb)
+            replay_sample = bs.delta | bsdfs.stochastic(bsdf_id, rs)
             bs = dr.detach(bs)
             sray = si.spawn_ray(ls.wi)
             sray.o[sc] = p_sc
@@ -282,7 +284,6 @@ class PRBVolPathIntegrator(_MediumAware):
             else:
                 Ld = dr.detach(Ld_unocc) * T_sh
                 L = L - Ld
-                dL_fwd = self._propagate(mode, dL, True, Ld_unocc, T_sh, dL_fwd)
                 # Replay the shadow ray's random numbers for the transmittance derivative.
                 rng2 = type(rng)()
                 rng2.state, rng2.inc = type(state[0])(state[0]), type(state[1])(state[1])
@@ -302,11 +303,15 @@ class PRBVolPathIntegrator(_MediumAware):
             cont = go_on & (pdf_next > 0)
             if not primal:
                 with dr.resume_grad():
-                    f_bs, _ = bsdfs.eval_pdf(bsdf_id, ctx, bs.wo, rs & cont & ~bs.delta)
+                    f_bs, _ = bsdfs.eval_pdf(bsdf_id, ctx, bs.wo, rs & cont & ~replay_sample)
+                    f_bs = dr.select(replay_sample, f_sampled, f_bs)
                     f_det = bs.weight * bs.pdf
                     ratio = dr.select(f_det != 0, f_bs * dr.rcp(dr.detach(f_det)), 0.0)
-                    Lr = dr.select(rs & cont & ~bs.delta, L * dr.replace_grad(mi.Spectrum(1.0), ratio), 0.0)
-                dL_fwd = self._propagate(mode, dL, True, Lr, 1.0, dL_fwd)
+                    Lr = dr.select(rs & cont, L * dr.replace_grad(mi.Spectrum(1.0), ratio), 0.0)
+                    # One traversal for the light sample and the continuation: they share
+                    # the BSDF query's graph (f_em and f_sampled), which a first traversal
+                    # would clear.
+                    dL_fwd = self._send(mode, dL, Lr + Ld_unocc * T_sh, dL_fwd)
             if bsdfs.dispersive and primal:
                 term = rs & bs.terminate & ~terminated
                 L[term] = first_only(L)
