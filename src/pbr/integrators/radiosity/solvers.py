@@ -77,16 +77,16 @@ class _Progress:
             self.bar.close()
 
 
-def jacobi(F, Le, rho, area, tolerance, max_iterations, progress=None):
-    st = SolveStats("jacobi")
-    t0 = time.perf_counter()
-    bar = _Progress("jacobi", progress)
-    L = Le.copy()
+def _iterate(st: SolveStats, step, tolerance, max_iterations, progress) -> None:
+    """Call ``step(iteration)`` until the residual it returns is at most ``tolerance``
+    (``None``: nothing is left to do) or ``max_iterations`` is reached, recording the
+    residuals in ``st`` and reporting them to ``progress``."""
+    bar = _Progress(st.solver, progress)
     for it in range(1, max_iterations + 1):
-        H = _gather(F, L)
-        L_new = Le + rho * H
-        r = _power(np.abs(L_new - L), area) / max(_power(L_new, area), 1e-300)
-        L = L_new
+        r = step(it)
+        if r is None:
+            st.converged = True
+            break
         st.residuals.append(r)
         st.iterations = it
         bar(it, r)
@@ -94,6 +94,21 @@ def jacobi(F, Le, rho, area, tolerance, max_iterations, progress=None):
             st.converged = True
             break
     bar.close()
+
+
+def jacobi(F, Le, rho, area, tolerance, max_iterations, progress=None):
+    st = SolveStats("jacobi")
+    t0 = time.perf_counter()
+    L = Le.copy()
+
+    def sweep(it):
+        nonlocal L
+        L_new = Le + rho * _gather(F, L)
+        r = _power(np.abs(L_new - L), area) / max(_power(L_new, area), 1e-300)
+        L = L_new
+        return r
+
+    _iterate(st, sweep, tolerance, max_iterations, progress)
     H = _gather(F, L)
     st.seconds = time.perf_counter() - t0
     return Le + rho * H, H, st
@@ -102,25 +117,17 @@ def jacobi(F, Le, rho, area, tolerance, max_iterations, progress=None):
 def gauss_seidel(F, Le, rho, area, tolerance, max_iterations, progress=None):
     st = SolveStats("gauss_seidel")
     t0 = time.perf_counter()
-    bar = _Progress("gauss_seidel", progress)
     L = Le.copy()
-    H = np.zeros_like(Le)
-    for it in range(1, max_iterations + 1):
+
+    def sweep(it):
         change = 0.0
         for i in range(len(L)):
-            h = F[i] @ L
-            new = Le[i] + rho[i] * h
+            new = Le[i] + rho[i] * (F[i] @ L)
             change += area[i] * float(np.abs(new - L[i]).sum())
             L[i] = new
-            H[i] = h
-        r = change / max(_power(L, area), 1e-300)
-        st.residuals.append(r)
-        st.iterations = it
-        bar(it, r)
-        if r <= tolerance:
-            st.converged = True
-            break
-    bar.close()
+        return change / max(_power(L, area), 1e-300)
+
+    _iterate(st, sweep, tolerance, max_iterations, progress)
     H = _gather(F, L)
     st.seconds = time.perf_counter() - t0
     return Le + rho * H, H, st
@@ -130,33 +137,26 @@ def progressive(column, Le, rho, area, tolerance, max_iterations, progress=None)
     """``column(j)``: F[:, j] (the receivers' form factors toward shooter j)."""
     st = SolveStats("progressive")
     t0 = time.perf_counter()
-    bar = _Progress("progressive", progress)
     H = np.zeros_like(Le)
     unshot = Le.copy()
     emitted = max(_power(Le, area), 1e-300)
     unshot_power = area * unshot.sum(axis=1)
-    ff_time = 0.0
-    for it in range(1, max_iterations + 1):
+
+    def shoot(it):
+        nonlocal unshot_power
         j = int(np.argmax(unshot_power))
         t1 = time.perf_counter()
         col = column(j)
-        ff_time += time.perf_counter() - t1
+        st.form_factor_seconds += time.perf_counter() - t1
         dH = col[:, None] * unshot[j][None, :]
-        dL = rho * dH
-        H += dH
+        H[:] += dH
         unshot[j] = 0.0
-        unshot += dL
+        unshot[:] += rho * dH
         unshot_power = area * unshot.sum(axis=1)
-        r = float(unshot_power.sum()) / emitted
-        st.residuals.append(r)
-        st.iterations = it
-        bar(it, r)
-        if r <= tolerance:
-            st.converged = True
-            break
-    bar.close()
-    st.form_factor_seconds = ff_time
-    st.seconds = time.perf_counter() - t0 - ff_time
+        return float(unshot_power.sum()) / emitted
+
+    _iterate(st, shoot, tolerance, max_iterations, progress)
+    st.seconds = time.perf_counter() - t0 - st.form_factor_seconds
     return Le + rho * H, H, st
 
 
@@ -167,19 +167,19 @@ def stochastic_jacobi(shoot, Le, rho, area, rays_per_iteration, tolerance, max_i
     tallied per (source, destination) pair before their power is deposited."""
     st = SolveStats("stochastic_jacobi")
     t0 = time.perf_counter()
-    bar = _Progress("stochastic_jacobi", progress)
     N, K = Le.shape
     rng = np.random.default_rng(seed)
     H = np.zeros_like(Le)
     unshot = Le.copy()                                   # radiance not yet propagated
     emitted = max(_power(Le, area), 1e-300)
-    for it in range(1, max_iterations + 1):
+
+    def iteration(it):
+        nonlocal unshot
         phi = np.pi * area[:, None] * unshot             # unshot power per bin
         w = phi.sum(axis=1)
         total = float(w.sum())
         if total <= 0:
-            st.converged = True
-            break
+            return None
         # Rays per source in proportion to its power (systematic sampling: the expected
         # count is exactly R p_i), each carrying phi_i / (R p_i).
         p = w / total
@@ -192,15 +192,10 @@ def stochastic_jacobi(shoot, Le, rho, area, rays_per_iteration, tolerance, max_i
         carry = np.where(p[:, None] > 0, phi / np.maximum(p * rays_per_iteration, 1e-300)[:, None], 0.0)
         received = deposit(*tally(src, dst, N), carry, N)
         dH = np.where(area[:, None] > 0, received / (np.pi * np.maximum(area, 1e-300))[:, None], 0.0)
-        H += dH
+        H[:] += dH
         unshot = rho * dH
-        r = _power(unshot, area) / emitted
-        st.residuals.append(r)
-        st.iterations = it
-        bar(it, r)
-        if r <= tolerance:
-            st.converged = True
-            break
-    bar.close()
+        return _power(unshot, area) / emitted
+
+    _iterate(st, iteration, tolerance, max_iterations, progress)
     st.seconds = time.perf_counter() - t0
     return Le + rho * H, H, st
