@@ -323,14 +323,14 @@ class _ConductorBase:
 class _Params:
     """Per-lane parameters of one query."""
 
-    def __init__(self, top, base, thick, albedo, g, medium, maxdepth, nsamples, terminate, ad, unroll):
+    def __init__(self, top, base, thick, albedo, g, medium, maxdepth, nsamples, terminate, unroll):
         self.top, self.base, self.thick, self.albedo, self.g = top, base, thick, albedo, g
         self.medium, self.maxdepth, self.nsamples, self.terminate = medium, maxdepth, nsamples, terminate
-        # ad: a parameter carries gradients, so the walks sample with detached parameters
-        # (see _reweighted) and their loops are unrolled (see dispatch.loop) to these trip
-        # counts (events, walks); else (0, 0): symbolic loops.
-        self.ad = ad
+        # Where a parameter carries gradients (ad), the walks sample with detached
+        # parameters (see _reweighted) and their loops are unrolled (see dispatch.loop)
+        # to these trip counts (events, walks); else (0, 0): symbolic loops.
         self.unroll_depth, self.unroll_samples = unroll
+        self.ad = self.unroll_depth > 0
 
 
 # ---------------------------------------------------------------- the BSDF family
@@ -444,7 +444,7 @@ class _Layered(BSDFType):
         ad = dr.grad_enabled(thick, albedo, g, *(vars(p) for p in parts if p is not None))
         unroll = (self.maxdepth_max, self.nsamples_max) if ad else (0, 0)
         return _Params(top, base, thick, albedo, g, medium, dr.gather(mi.UInt32, self.maxdepth, idx, active),
-                       dr.gather(mi.UInt32, self.nsamples, idx, active), terminate, ad, unroll)
+                       dr.gather(mi.UInt32, self.nsamples, idx, active), terminate, unroll)
 
     # -- the three estimators -------------------------------------------------------
     def _f(self, P: _Params, wv, wl, active):
