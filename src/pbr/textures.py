@@ -176,13 +176,13 @@ class TextureSet:
         consts = [self.items[s] for s in self.constants]
         if consts:
             nc = len(consts)
-            coeffs = dr.zeros(mi.Array3f, nc)
-            scale = dr.zeros(mi.Float, nc)
+            # 4 consecutive floats per constant (3 sigmoid coefficients, scale), read
+            # with one packet gather (and, in adjoint passes, one packet scatter-add).
+            packed = dr.zeros(mi.Float, 4 * nc)
             for i, c in enumerate(consts):
                 cf, sc = c.coeffs_scale()
-                dr.scatter(coeffs, cf, mi.UInt32(i))
-                dr.scatter(scale, sc, mi.UInt32(i))
-            T["c_coeffs"], T["c_scale"] = coeffs, scale
+                dr.scatter(packed, mi.Array4f(cf[0], cf[1], cf[2], sc), mi.UInt32(i))
+            T["c_packed"] = packed
             T["c_base"] = mi.UInt32([c.base for c in consts])
             T["c_d65"] = mi.Bool([c.form == "illuminant" for c in consts])
             tabs = [c for c in consts if c.base == BASE_TABLE]
@@ -208,12 +208,13 @@ class TextureSet:
             sizes = [b.width * b.height for b in bm]
             offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.uint32)
             total = int(sum(sizes))
-            coeffs = dr.zeros(mi.Array3f, total)
-            scales = dr.zeros(mi.Float, total)
+            # One texel = 4 consecutive floats (3 sigmoid coefficients, scale): one packet
+            # gather per texel lookup, one packet scatter-add per texel in adjoint passes.
+            texels = dr.zeros(mi.Float, 4 * total)
             for b, off in zip(bm, offsets):
                 data = b.params["data"]
                 ch = data.shape[2] if len(data.shape) == 3 else 1
-                flat = dr.ravel(data) if False else data.array
+                flat = data.array
                 npx = b.width * b.height
                 idx = dr.arange(mi.UInt32, npx)
                 if ch >= 3:
@@ -222,12 +223,11 @@ class TextureSet:
                     g = dr.gather(mi.Float, flat, idx * ch)
                     rgb = mi.Color3f(g, g, g)
                 if b.form == "albedo":
-                    cf, sc = spec.rgb_to_coeffs(rgb), mi.Float(1.0) + dr.zeros(mi.Float, npx)
+                    cf, sc = spec.rgb_to_coeffs(rgb), mi.Float(1.0)
                 else:
                     cf, sc = spec.rgb_unbounded(rgb)
-                dr.scatter(coeffs, cf, idx + int(off))
-                dr.scatter(scales, sc, idx + int(off))
-            T["b_coeffs"], T["b_scale"] = coeffs, scales
+                dr.scatter(texels, mi.Array4f(cf[0], cf[1], cf[2], sc), idx + int(off))
+            T["b_texel"] = texels
             T["b_offset"] = mi.UInt32(offsets)
             T["b_size"] = mi.Array2u([b.width for b in bm], [b.height for b in bm])
             T["b_bilinear"] = mi.Bool([b.filter_type == "bilinear" for b in bm])
@@ -286,8 +286,9 @@ class TextureSet:
     def _eval_constant(self, ci, lam, active, illuminant=True):
         T = self.T
         v = mi.Spectrum(1.0)
+        t = dr.gather(mi.Array4f, T["c_packed"], ci, active)
         if self.has_sigmoid:
-            c = dr.gather(mi.Array3f, T["c_coeffs"], ci, active)
+            c = mi.Array3f(t[0], t[1], t[2])
             if self.bases == {BASE_SIGMOID}:
                 v = spec.sigmoid_polynomial(c, lam)
             else:
@@ -301,7 +302,7 @@ class TextureSet:
             v = dr.select(base == BASE_TABLE, tab, v)
         if illuminant and self.has_d65 and self.constants:
             v = dr.select(dr.gather(mi.Bool, T["c_d65"], ci, active), v * spec.d65(lam), v)
-        return v * dr.gather(mi.Float, T["c_scale"], ci, active)
+        return v * t[3]
 
     @staticmethod
     def _lerp_1nm(table, off, l, active):
@@ -340,9 +341,8 @@ class TextureSet:
 
         def texel(dx, dy):
             k = index(dx, dy)
-            c = dr.gather(mi.Array3f, T["b_coeffs"], k, active)
-            s = dr.gather(mi.Float, T["b_scale"], k, active)
-            return spec.sigmoid_polynomial(c, lam) * s
+            t = dr.gather(mi.Array4f, T["b_texel"], k, active)
+            return spec.sigmoid_polynomial(mi.Array3f(t[0], t[1], t[2]), lam) * t[3]
 
         v = texel(0, 0)
         if any(self.items[s].filter_type == "bilinear" for s in self.bitmaps):
