@@ -62,3 +62,17 @@ def test_to_xyz_of_unit_spectrum():
     xyz_t, _ = S.cie_tables_np()
     expect = np.trapezoid(xyz_t, dx=5.0, axis=0) / S.CIE_Y_INTEGRAL
     assert np.allclose(xyz, expect, rtol=2e-3)
+
+
+def test_shipped_cmfs_are_colour_sciences():
+    """data/cie1931_2deg_5nm.spd (read at run time, so that pbr need not import
+    colour-science and its matplotlib) holds colour-science's CIE 1931 2-degree table."""
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import colour
+    cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
+    grid = np.arange(95) * 5.0 + 360
+    xyz, _ = S.cie_tables_np()
+    assert xyz.shape == (95, 3)
+    assert np.allclose(xyz, np.asarray(cmfs[grid]), rtol=1e-9, atol=0)
