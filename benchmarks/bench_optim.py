@@ -148,17 +148,14 @@ def child(a):
             o.timed_step()
         out["rss_mib"] = _rss_mib()
     else:
-        # The whole step frozen, its state passed as arguments. Mitsuba takes the seed as
-        # an opaque array (one recording for every iteration; seed_grad=0 lets it derive
-        # the adjoint seed inside the recording); pbr's render takes Python ints.
-        frozen = dr.freeze(o.step)
+        # The whole step frozen, its state passed as arguments. The seed is an opaque
+        # array (an int would be baked into the recording); seed_grad=0 lets the renderer
+        # derive the adjoint seed inside the recording.
+        frozen = (pbr.freeze if renderer == "pbr" else dr.freeze)(o.step)
 
         times = []
         for i in range(a.warmup + a.reps):
-            if renderer == "pbr":
-                s, sg = i + 1, 1_000_003 + i
-            else:
-                s, sg = dr.opaque(mi.UInt32, i + 1), 0
+            s, sg = dr.opaque(mi.UInt32, i + 1), 0
             t = time.perf_counter()
             loss = frozen(o.scene, o.opt, o.ref, s, sg)
             dr.eval(loss, o.opt[o.key])

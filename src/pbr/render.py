@@ -11,6 +11,7 @@ from __future__ import annotations
 import drjit as dr
 
 from . import backend, dispatch
+from .samplers import seed_array
 from .scene.tables import tables_as_leaves
 
 
@@ -40,7 +41,9 @@ class _RenderOp(dr.CustomOp):
 def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, spp=0, spp_grad=0,
            progress=None):
     """Render ``scene`` from sensor ``sensor``; returns ``mi.TensorXf`` (H, W, 3), linear
-    sRGB (``np.asarray`` gives float32). ``spp=0`` uses the scene's sampler count."""
+    sRGB (``np.asarray`` gives float32). ``spp=0`` uses the scene's sampler count. Seeds
+    are Python ints or width-1 ``mi.UInt32`` (pass the latter, e.g. ``dr.opaque(mi.UInt32,
+    i)``, to a function under ``dr.freeze``: an int is baked into its recording)."""
     backend.ensure()
     integrator = integrator or scene.integrator
     if not isinstance(sensor, int) or not 0 <= sensor < len(scene.sensors):
@@ -52,8 +55,12 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
     if scene.bsdfs.dispersive:
         raise NotImplementedError("render: gradients of scenes with dispersive dielectrics (a "
                                   "wavelength-dependent IOR) are not supported yet")
-    if seed_grad == 0:
-        seed_grad = seed + 0x9E3779B9 if seed else 0x51ED270B
+    if isinstance(seed_grad, int) and seed_grad == 0:
+        if isinstance(seed, int):
+            seed_grad = seed + 0x9E3779B9 if seed else 0x51ED270B
+        else:   # a mi.UInt32 (e.g. inside dr.freeze): the same rule, per lane
+            seed = seed_array(seed)
+            seed_grad = dr.select(seed == 0, 0x51ED270B, seed + 0x9E3779B9)
     spp_grad = spp_grad or spp
     from .scene.params import traverse
     p = params if params is not None else traverse(scene)

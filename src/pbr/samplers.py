@@ -2,7 +2,9 @@
 
 Each sample's stream is seeded by hashing (seed, global sample index) with TEA, so
 renders split into passes, or repeated with the same seed, use the same numbers. The
-seed is an opaque kernel input: changing it does not recompile the kernel."""
+seed is an opaque kernel input: changing it does not recompile the kernel. It may be a
+Python int or a ``mi.UInt32`` of width 1 (what ``dr.freeze`` needs: an int would be
+baked into the recording)."""
 
 from __future__ import annotations
 
@@ -10,6 +12,15 @@ import drjit as dr
 import mitsuba as mi
 
 from .scene.props import Props
+
+
+def seed_array(seed) -> mi.UInt32:
+    """``seed`` (a Python int or a width-1 ``mi.UInt32``) as an opaque ``mi.UInt32``."""
+    if isinstance(seed, int):
+        return dr.opaque(mi.UInt32, seed & 0xFFFFFFFF)
+    if not (isinstance(seed, mi.UInt32) and dr.width(seed) == 1):
+        raise TypeError(f"seed: expected a Python int or a mi.UInt32 of width 1, got {type(seed).__name__}")
+    return seed
 
 
 class IndependentSampler:

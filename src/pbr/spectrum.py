@@ -104,6 +104,11 @@ class _Tables:
         return cls._cache[v]
 
 
+def tables() -> dict:
+    """The Dr.Jit spectral tables of the active variant (CIE, D65, RGB coefficients)."""
+    return _Tables.get()
+
+
 def _lerp_table(table, lam, active=True):
     """Linear interpolation of a 5 nm table at wavelengths ``lam`` (0 outside 360-830)."""
     t = (lam - LAMBDA_MIN) * (1.0 / _CIE_STEP)

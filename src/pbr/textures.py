@@ -172,17 +172,10 @@ class TextureSet:
             for i, s in enumerate(lst):
                 index[s] = i
         T = {"slot_kind": mi.UInt32(kinds), "slot_index": mi.UInt32(index)}
+        T.update(self._value_tables())
         # Constants.
         consts = [self.items[s] for s in self.constants]
         if consts:
-            nc = len(consts)
-            # 4 consecutive floats per constant (3 sigmoid coefficients, scale), read
-            # with one packet gather (and, in adjoint passes, one packet scatter-add).
-            packed = dr.zeros(mi.Float, 4 * nc)
-            for i, c in enumerate(consts):
-                cf, sc = c.coeffs_scale()
-                dr.scatter(packed, mi.Array4f(cf[0], cf[1], cf[2], sc), mi.UInt32(i))
-            T["c_packed"] = packed
             T["c_base"] = mi.UInt32([c.base for c in consts])
             T["c_d65"] = mi.Bool([c.form == "illuminant" for c in consts])
             tabs = [c for c in consts if c.base == BASE_TABLE]
@@ -202,32 +195,11 @@ class TextureSet:
             T["k_color0"] = mi.UInt32([index[c.color0] for c in ch])
             T["k_color1"] = mi.UInt32([index[c.color1] for c in ch])
             T["k_to_uv"] = [mi.Float([c.to_uv[r, k] for c in ch]) for r in range(2) for k in (0, 1, 3)]
-        # Bitmaps: per-texel sigmoid coefficients (+ scale for unbounded ones).
+        # Bitmaps: addressing of the texel pool.
         if self.bitmaps:
             bm = [self.items[s] for s in self.bitmaps]
             sizes = [b.width * b.height for b in bm]
             offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.uint32)
-            total = int(sum(sizes))
-            # One texel = 4 consecutive floats (3 sigmoid coefficients, scale): one packet
-            # gather per texel lookup, one packet scatter-add per texel in adjoint passes.
-            texels = dr.zeros(mi.Float, 4 * total)
-            for b, off in zip(bm, offsets):
-                data = b.params["data"]
-                ch = data.shape[2] if len(data.shape) == 3 else 1
-                flat = data.array
-                npx = b.width * b.height
-                idx = dr.arange(mi.UInt32, npx)
-                if ch >= 3:
-                    rgb = mi.Color3f(*[dr.gather(mi.Float, flat, idx * ch + k) for k in range(3)])
-                else:
-                    g = dr.gather(mi.Float, flat, idx * ch)
-                    rgb = mi.Color3f(g, g, g)
-                if b.form == "albedo":
-                    cf, sc = spec.rgb_to_coeffs(rgb), mi.Float(1.0)
-                else:
-                    cf, sc = spec.rgb_unbounded(rgb)
-                dr.scatter(texels, mi.Array4f(cf[0], cf[1], cf[2], sc), idx + int(off))
-            T["b_texel"] = texels
             T["b_offset"] = mi.UInt32(offsets)
             T["b_size"] = mi.Array2u([b.width for b in bm], [b.height for b in bm])
             T["b_bilinear"] = mi.Bool([b.filter_type == "bilinear" for b in bm])
@@ -276,6 +248,54 @@ class TextureSet:
         self.has_table = any(c.base == BASE_TABLE for c in consts)
         self.has_d65 = any(c.form == "illuminant" for c in consts) or any(
             self.items[s].form == "illuminant" for s in self.bitmaps)
+
+    def _value_tables(self) -> dict:
+        """The tables that hold parameter values, built differentiably from them: 4 floats
+        per constant and per bitmap texel (3 sigmoid coefficients, scale), read with one
+        packet gather (and, in adjoint passes, scatter-added as one packet)."""
+        T = {}
+        consts = [self.items[s] for s in self.constants]
+        if consts:
+            packed = dr.zeros(mi.Float, 4 * len(consts))
+            for i, c in enumerate(consts):
+                cf, sc = c.coeffs_scale()
+                dr.scatter(packed, mi.Array4f(cf[0], cf[1], cf[2], sc), mi.UInt32(i))
+            T["c_packed"] = packed
+        if self.bitmaps:
+            bm = [self.items[s] for s in self.bitmaps]
+            texels = dr.zeros(mi.Float, 4 * sum(b.width * b.height for b in bm))
+            off = 0
+            for b in bm:
+                data = b.params["data"]
+                ch = data.shape[2] if len(data.shape) == 3 else 1
+                npx = b.width * b.height
+                idx = dr.arange(mi.UInt32, npx)
+                if ch >= 3:
+                    rgb = mi.Color3f(*[dr.gather(mi.Float, data.array, idx * ch + k) for k in range(3)])
+                else:
+                    g = dr.gather(mi.Float, data.array, idx * ch)
+                    rgb = mi.Color3f(g, g, g)
+                if b.form == "albedo":
+                    cf, sc = spec.rgb_to_coeffs(rgb), mi.Float(1.0)
+                else:
+                    cf, sc = spec.rgb_unbounded(rgb)
+                dr.scatter(texels, mi.Array4f(cf[0], cf[1], cf[2], sc), idx + off)
+                off += npx
+            T["b_texel"] = texels
+        return T
+
+    def refreshable(self, tex) -> bool:
+        """Whether :meth:`refresh` suffices after ``tex``'s parameters change (constants
+        and colour bitmaps; not the raw texels of normal and bump maps)."""
+        return isinstance(tex, ConstantSpectrum) or (isinstance(tex, Bitmap) and not getattr(tex, "needs_raw", False))
+
+    def refresh(self) -> None:
+        """Recompute the value tables from the current parameters, keeping everything else
+        :meth:`build` made (slots, kinds, sizes, addressing). Dr.Jit operations only: it
+        can run inside ``dr.freeze``."""
+        T = self._value_tables()
+        dr.eval(T)
+        self.T.update(T)
 
     # -- evaluation (inside kernels) ---------------------------------------------------
     @staticmethod

@@ -19,7 +19,7 @@ import mitsuba as mi
 import numpy as np
 
 from .. import spectrum as spec
-from ..samplers import IndependentSampler
+from ..samplers import IndependentSampler, seed_array
 from ..sampling import power_heuristic
 from ..spectrum import SampledWavelengths
 
@@ -54,7 +54,7 @@ class SamplingIntegrator:
         sub = idx - pixel * per_pass
         p_index = dr.opaque(mi.UInt32, pass_index)
         sample_index = pixel * spp + p_index * per_pass + sub
-        rng = IndependentSampler.make_rng(sample_index, dr.opaque(mi.UInt32, seed & 0xFFFFFFFF))
+        rng = IndependentSampler.make_rng(sample_index, seed_array(seed))
         wl = SampledWavelengths.sample_visible(rng.next_float32())
         off, weight = cam.film.rfilter.sample(mi.Point2f(rng.next_float32(), rng.next_float32()))
         px = mi.Float(pixel % w) + 0.5 + off.x

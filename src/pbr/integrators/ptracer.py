@@ -28,7 +28,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..bsdfs.base import ShadingContext
-from ..samplers import IndependentSampler
+from ..samplers import IndependentSampler, seed_array
 from ..spectrum import SampledWavelengths, first_only
 from .base import SamplingIntegrator, _progress
 from .lightpath import (SplatFilm, check_light_paths, connect_to_camera, sample_importance, shading_correction,
@@ -85,7 +85,7 @@ class ParticleTracerIntegrator(SamplingIntegrator):
         idx = dr.arange(mi.UInt32, n)
         pixel = idx // per_pass
         sample_index = pixel * spp + dr.opaque(mi.UInt32, pass_index) * per_pass + (idx - pixel * per_pass)
-        rng = IndependentSampler.make_rng(sample_index, dr.opaque(mi.UInt32, seed & 0xFFFFFFFF))
+        rng = IndependentSampler.make_rng(sample_index, seed_array(seed))
         wl = SampledWavelengths.sample_visible(rng.next_float32())
         active = mi.Bool(True)
         if self.max_depth == 0:

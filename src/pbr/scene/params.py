@@ -81,10 +81,27 @@ class SceneParameters:
         self._dirty.add(key)
 
     def update(self, values: dict | None = None):
-        """Apply ``values`` (if given), then rebuild the tables that depend on parameters."""
+        """Apply ``values`` (if given), then rebuild the tables that depend on parameters.
+
+        When every changed key is a BSDF's constant or bitmap texture, only the texture
+        value tables are recomputed, with Dr.Jit operations alone (so that an update can be
+        part of a ``dr.freeze``-recorded step); otherwise, and when nothing was assigned
+        (e.g. after ``dr.enable_grad(params[k])``), the whole scene is rebuilt."""
         for k, v in (values or {}).items():
             self[k] = v
-        self.scene.build()
+        tex = self.scene.textures
+        slot_of = {id(t): i for i, t in enumerate(tex.items)}
+        owners = [self._owners[k][0] for k in self._dirty]
+        if owners and all(slot_of.get(id(o)) in self.scene.bsdf_slots and tex.refreshable(o) for o in owners):
+            tex.refresh()
+        else:
+            if dr.flag(dr.JitFlag.FreezingScope):
+                raise RuntimeError(
+                    f"params.update(): {', '.join(sorted(self._dirty)) or 'an update with no assigned keys'} "
+                    "needs a rebuild of the scene's tables, which reads parameters on the host and "
+                    "cannot be recorded by dr.freeze; inside a frozen function only BSDF textures "
+                    "(constant or bitmap, e.g. '<bsdf>.reflectance.value' / '.data') can be updated")
+            self.scene.build()
         self._dirty.clear()
         return self
 

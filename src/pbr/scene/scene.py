@@ -18,7 +18,11 @@ class Scene:
         self.geometry = Geometry(shapes)
         self.mi_scene = self.geometry.mi_scene
         self.shape_ids = shape_ids
-        meshattr.bind(self.textures, shapes, shape_bsdf, shape_ids, getattr(loader, "bsdf_textures", {}))
+        bsdf_textures = getattr(loader, "bsdf_textures", {})
+        meshattr.bind(self.textures, shapes, shape_bsdf, shape_ids, bsdf_textures)
+        # Texture slots only BSDFs read (in kernels): lights and media also read theirs on
+        # the host when building (power estimates, majorants).
+        self.bsdf_slots = frozenset().union(*bsdf_textures.values())
         self.shape_bsdf = mi.UInt32(shape_bsdf)
         self.shape_light = mi.UInt32(shape_light)     # light index + 1; 0: not emissive
         self.media = loader.media

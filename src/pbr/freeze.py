@@ -1,0 +1,77 @@
+"""``pbr.freeze``: ``dr.freeze`` for functions that take pbr scenes.
+
+``dr.freeze`` records the kernels a function launches and replays them on later calls
+without tracing the Python code again. It sees the Dr.Jit arrays of its arguments only
+when they are PyTrees (containers, dataclasses, ``DRJIT_STRUCT``) or traversable C++
+objects; a :class:`pbr.scene.scene.Scene` is neither, and every array it holds would be
+read as a constant created outside the recording (an error). ``pbr.freeze`` passes
+``dr.freeze`` a ``state_fn`` that lists them: the tables reachable from each scene
+argument (texture, BSDF, light, medium, sensor tables), the scene's parameter values,
+its Mitsuba geometry, and pbr's spectral tables.
+
+Within a frozen function, ``params.update()`` must take its values-only path (a BSDF's
+constant or bitmap texture; see :meth:`pbr.SceneParameters.update`): a full rebuild reads
+parameters on the host, which a recording cannot replay. Seeds are passed as
+``mi.UInt32`` (``dr.opaque(mi.UInt32, i)``), not Python ints, which would be recorded as
+constants (one recording per seed).
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+
+from . import spectrum
+from .scene.params import SceneParameters
+from .scene.scene import Scene
+from .scene.tables import map_tables
+
+
+def scene_state(scene: Scene) -> list:
+    """The Dr.Jit state a frozen function may read or change through ``scene``: its table
+    arrays, the containers in which an update re-binds arrays (the texture tables, the
+    parameter values: a replay assigns the new values there) and the Mitsuba scene
+    (traversable by Dr.Jit)."""
+    arrays = []
+
+    def keep(x):
+        arrays.append(x)
+        return x
+
+    map_tables(scene, keep)
+    return [arrays, scene.textures.T, [owner.params for owner in scene.param_owners()], scene.mi_scene]
+
+
+def _state(args, kwargs) -> list:
+    scenes, seen = [], set()
+
+    def find(x):
+        if isinstance(x, SceneParameters):
+            x = x.scene
+        if isinstance(x, Scene) and id(x) not in seen:
+            seen.add(id(x))
+            scenes.append(x)
+        elif isinstance(x, (list, tuple)):
+            for v in x:
+                find(v)
+        elif isinstance(x, dict):
+            for v in x.values():
+                find(v)
+
+    find(args)
+    find(kwargs)
+    return [scene_state(s) for s in scenes] + [spectrum.tables()]
+
+
+def freeze(fn=None, **kwargs):
+    """``dr.freeze(fn, **kwargs)`` that also traverses the pbr scenes among ``fn``'s
+    arguments (directly, in containers, or as ``SceneParameters``). Usable as
+    ``@pbr.freeze`` or ``pbr.freeze(fn, warn_after=...)``."""
+    if fn is None:
+        return lambda f: freeze(f, **kwargs)
+    user_state = kwargs.pop("state_fn", None)
+
+    def state_fn(*a, **k):
+        s = _state(a, k)
+        return s + [user_state(*a, **k)] if user_state is not None else s
+
+    return dr.freeze(fn, state_fn=state_fn, **kwargs)
