@@ -11,7 +11,6 @@ needs it to weight emitter hits by MIS.
 
 from __future__ import annotations
 
-import hashlib
 
 import drjit as dr
 import mitsuba as mi
@@ -75,11 +74,9 @@ def make_light_sampler(kind: str, powers, bounds=None):
         return LightSampler(kind, powers)
     table = ensure_table(bounds, len(powers))
     # Scenes are rebuilt on every params.update(): reuse the tree while the bounds stay.
-    h = hashlib.sha1(mi.variant().encode())
-    for a in (table.finite, table.p_min, table.p_max, table.phi, table.w, table.cos_o, table.cos_e,
-              table.two_sided):
-        h.update(np.ascontiguousarray(a).tobytes())
-    key = h.hexdigest()
+    # The key is the bounds' bytes themselves (exact; hashlib would load OpenSSL, 3.5 MiB).
+    key = (mi.variant(),) + tuple(np.ascontiguousarray(a).tobytes() for a in (
+        table.finite, table.p_min, table.p_max, table.phi, table.w, table.cos_o, table.cos_e, table.two_sided))
     if key not in _BVH_CACHE:
         if len(_BVH_CACHE) >= 4:
             _BVH_CACHE.pop(next(iter(_BVH_CACHE)))
