@@ -10,7 +10,7 @@ argument (texture, BSDF, light, medium, sensor tables), the scene's parameter va
 its Mitsuba geometry, and pbr's spectral tables.
 
 Within a frozen function, ``params.update()`` must take its values-only path (a BSDF's
-constant or bitmap texture; see :meth:`pbr.SceneParameters.update`): a full rebuild reads
+constant or bitmap texture, or its ``eta``; see :meth:`pbr.SceneParameters.update`): a full rebuild reads
 parameters on the host, which a recording cannot replay. Seeds are passed as
 ``mi.UInt32`` (``dr.opaque(mi.UInt32, i)``), not Python ints, which would be recorded as
 constants (one recording per seed).
@@ -38,7 +38,10 @@ def scene_state(scene: Scene) -> list:
         return x
 
     map_tables(scene, keep)
-    return [arrays, scene.textures.T, [owner.params for owner in scene.param_owners()], scene.mi_scene]
+    # Attribute dicts of the BSDF families whose tables an update re-binds (``eta``).
+    refreshed = [vars(f) for f in scene.bsdfs.families.values() if hasattr(f, "refresh_params")]
+    return [arrays, scene.textures.T, refreshed, [owner.params for owner in scene.param_owners()],
+            scene.mi_scene]
 
 
 def _state(args, kwargs) -> list:

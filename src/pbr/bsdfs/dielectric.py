@@ -174,8 +174,12 @@ class _Dielectric(BSDFType):
     def param_owners(self) -> list:
         return [i["owner"] for i in self.instances if i["owner"] is not None]
 
-    def build(self) -> None:
+    def refresh_params(self) -> None:
+        """Recompute the table of the IOR parameters (see ``SceneParameters.update``)."""
         self.eta = param_table([i["owner"].params["eta"] if i["owner"] else i["eta"] for i in self.instances])
+
+    def build(self) -> None:
+        self.refresh_params()
         self.dispersive = any(i["int_slot"] != _NO_TEXTURE for i in self.instances)
         if self.dispersive:
             self.int_slot = mi.UInt32([i["int_slot"] for i in self.instances])

@@ -391,11 +391,15 @@ class _Layered(BSDFType):
         inst["nsamples"] = props.int("nsamples", 1, min=1)
         return inst
 
+    def refresh_params(self) -> None:
+        """Recompute the table of the coat IOR parameters (see ``SceneParameters.update``)."""
+        p = self._prefix + "eta"
+        self.eta = param_table([i["owner"].params[p] if i["owner"] else i["eta"] for i in self.instances])
+
     def build(self) -> None:
         I = self.instances  # noqa: E741
         u32 = lambda k: mi.UInt32([i[k] for i in I])  # noqa: E731
-        p = self._prefix + "eta"
-        self.eta = param_table([i["owner"].params[p] if i["owner"] else i["eta"] for i in I])
+        self.refresh_params()
         self.dispersive = any(i["eta_slot"] != _NONE for i in I)
         self.eta_slot = u32("eta_slot")
         self.remap = mi.Bool([i["remap"] for i in I])

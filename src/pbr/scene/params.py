@@ -24,7 +24,17 @@ class ParamOwner:
 
 def param_table(values) -> "mi.Float":
     """A ``mi.Float`` table of per-instance scalars (Python floats or width-1 Dr.Jit
-    arrays), built by scatters so that parameters with gradients stay attached."""
+    arrays), built by scatters so that parameters with gradients stay attached. While
+    ``dr.freeze`` records, every entry is scattered as a literal (a table copied from a
+    Python list cannot be recorded). The table has at least two entries: Dr.Jit turns a
+    gather from a one-entry array into a broadcast of its value, which a recording keeps
+    as the value it had when recorded."""
+    values = list(values) + [0.0] * (2 - len(values))
+    if dr.flag(dr.JitFlag.FreezingScope):
+        table = dr.zeros(mi.Float, len(values))
+        for i, v in enumerate(values):
+            dr.scatter(table, mi.Float(v), mi.UInt32(i))
+        return table
     plain = [v if isinstance(v, (int, float)) else 0.0 for v in values]
     table = mi.Float(plain)
     for i, v in enumerate(values):
@@ -83,24 +93,33 @@ class SceneParameters:
     def update(self, values: dict | None = None):
         """Apply ``values`` (if given), then rebuild the tables that depend on parameters.
 
-        When every changed key is a BSDF's constant or bitmap texture, only the texture
-        value tables are recomputed, with Dr.Jit operations alone (so that an update can be
-        part of a ``dr.freeze``-recorded step); otherwise, and when nothing was assigned
-        (e.g. after ``dr.enable_grad(params[k])``), the whole scene is rebuilt."""
+        When every changed key is a BSDF's constant or bitmap texture or a BSDF's own
+        scalar (a dielectric's or coating's ``eta``), only those value tables are
+        recomputed, with Dr.Jit operations alone (so that an update can be part of a
+        ``dr.freeze``-recorded step); otherwise, and when nothing was assigned (e.g. after
+        ``dr.enable_grad(params[k])``), the whole scene is rebuilt."""
         for k, v in (values or {}).items():
             self[k] = v
         tex = self.scene.textures
         slot_of = {id(t): i for i, t in enumerate(tex.items)}
+        family_of = {id(o): f for f in self.scene.bsdfs.families.values()
+                     if hasattr(f, "refresh_params") for o in f.param_owners()}
         owners = [self._owners[k][0] for k in self._dirty]
-        if owners and all(slot_of.get(id(o)) in self.scene.bsdf_slots and tex.refreshable(o) for o in owners):
-            tex.refresh()
+        textures = [o for o in owners if slot_of.get(id(o)) in self.scene.bsdf_slots and tex.refreshable(o)]
+        families = {id(family_of[id(o)]): family_of[id(o)] for o in owners if id(o) in family_of}
+        if owners and len(textures) + sum(id(o) in family_of for o in owners) == len(owners):
+            if textures:
+                tex.refresh()
+            for f in families.values():
+                f.refresh_params()
         else:
             if dr.flag(dr.JitFlag.FreezingScope):
                 raise RuntimeError(
                     f"params.update(): {', '.join(sorted(self._dirty)) or 'an update with no assigned keys'} "
                     "needs a rebuild of the scene's tables, which reads parameters on the host and "
                     "cannot be recorded by dr.freeze; inside a frozen function only BSDF textures "
-                    "(constant or bitmap, e.g. '<bsdf>.reflectance.value' / '.data') can be updated")
+                    "(constant or bitmap, e.g. '<bsdf>.reflectance.value' / '.data') and a BSDF's "
+                    "'eta' can be updated")
             self.scene.build()
         self._dirty.clear()
         return self
