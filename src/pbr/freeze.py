@@ -18,6 +18,9 @@ constants (one recording per seed).
 
 from __future__ import annotations
 
+import functools
+import gc
+
 import drjit as dr
 
 from . import spectrum
@@ -77,4 +80,27 @@ def freeze(fn=None, **kwargs):
         s = _state(a, k)
         return s + [user_state(*a, **k)] if user_state is not None else s
 
-    return dr.freeze(fn, state_fn=state_fn, **kwargs)
+    return _Frozen(fn, dr.freeze(fn, state_fn=state_fn, **kwargs))
+
+
+class _Frozen:
+    """The frozen function, called with Python's cyclic garbage collector paused: a
+    collection during a recording can release arrays made before it (e.g. NumPy buffers
+    mapped by an earlier render), whose release Dr.Jit cannot record (it aborts the
+    process). Other attributes (``n_recordings``, ...) are ``dr.freeze``'s."""
+
+    def __init__(self, fn, frozen):
+        self._frozen = frozen
+        functools.update_wrapper(self, fn)
+
+    def __call__(self, *args, **kwargs):
+        enabled = gc.isenabled()
+        gc.disable()
+        try:
+            return self._frozen(*args, **kwargs)
+        finally:
+            if enabled:
+                gc.enable()
+
+    def __getattr__(self, name):
+        return getattr(self._frozen, name)
