@@ -1,3 +1,4 @@
+import pytest
 import numpy as np
 import drjit as dr
 import mitsuba as mi
@@ -76,3 +77,16 @@ def test_shipped_cmfs_are_colour_sciences():
     xyz, _ = S.cie_tables_np()
     assert xyz.shape == (95, 3)
     assert np.allclose(xyz, np.asarray(cmfs[grid]), rtol=1e-9, atol=0)
+
+
+def test_spectrum_files_bad_input_names_file_and_line(tmp_path):
+    f = tmp_path / "eta.spd"
+    f.write_text("# wavelength value\n400 1.5  # a comment\n500 x\n")
+    with pytest.raises(ValueError, match=r"eta\.spd:3: expected numbers"):
+        S.read_spd(str(f))
+    f.write_text("400 1.5\n500 1.4 9\n")
+    with pytest.raises(ValueError, match=r"eta\.spd:2: 3 columns"):
+        S.read_spd(str(f))
+    f.write_text("400 1.5  # a comment\n\n700 1.4\n")
+    wl, v = S.read_spd(str(f))
+    assert wl.tolist() == [400, 700] and v.tolist() == [1.5, 1.4]

@@ -50,18 +50,32 @@ _DATA = os.path.join(os.path.dirname(__file__), "data")
 
 # ----------------------------------------------------------------------------- data
 
-def _read_data(name: str) -> np.ndarray:
-    """A whitespace-separated table shipped in ``data/`` (``#`` comments). Parsed here, not
-    with ``np.loadtxt``, which imports NumPy's URL/compression readers (1 MiB)."""
-    with open(os.path.join(_DATA, name)) as f:
-        return np.array([[float(x) for x in ln.split()] for ln in f if ln.strip() and not ln.startswith("#")])
+def read_table(path: str) -> np.ndarray:
+    """A whitespace-separated table of numbers, ``#`` starting a comment: (rows, columns).
+    Parsed here, not with ``np.loadtxt``, which imports NumPy's URL/compression readers
+    (1 MiB resident); errors name the file and line."""
+    rows = []
+    with open(path) as f:
+        for n, ln in enumerate(f, 1):
+            fields = ln.split("#", 1)[0].split()
+            if not fields:
+                continue
+            try:
+                rows.append([float(x) for x in fields])
+            except ValueError:
+                raise ValueError(f"{path}:{n}: expected numbers, got {ln.strip()!r}") from None
+            if len(rows[-1]) != len(rows[0]):
+                raise ValueError(f"{path}:{n}: {len(rows[-1])} columns, the first row has {len(rows[0])}")
+    if not rows:
+        raise ValueError(f"{path}: no data")
+    return np.array(rows)
 
 
 @lru_cache(maxsize=None)
 def cie_tables_np() -> tuple[np.ndarray, np.ndarray]:
     """(xyz[95, 3], d65[95]) on the 5 nm grid 360..830 nm; d65 has unit luminance."""
-    xyz = _read_data("cie1931_2deg_5nm.spd")[:, 1:]
-    d65 = _read_data("cie_d65_5nm.spd")[:, 1]
+    xyz = read_table(os.path.join(_DATA, "cie1931_2deg_5nm.spd"))[:, 1:]
+    d65 = read_table(os.path.join(_DATA, "cie_d65_5nm.spd"))[:, 1]
     # Scale D65 so that it integrates to a luminance of 1 (as XYZ is computed below).
     d65 = d65 / (np.sum(d65 * xyz[:, 1]) * _CIE_STEP / CIE_Y_INTEGRAL
                  - 0.5 * _CIE_STEP * (d65[0] * xyz[0, 1] + d65[-1] * xyz[-1, 1]) / CIE_Y_INTEGRAL)
@@ -310,7 +324,7 @@ def sellmeier_ior(name: str, lam_nm: np.ndarray) -> np.ndarray:
 
 def read_spd(path: str) -> tuple[np.ndarray, np.ndarray]:
     """Read a two-column ``wavelength value`` file (``#`` comments allowed)."""
-    data = np.loadtxt(path, comments="#", ndmin=2)
+    data = read_table(path)
     if data.shape[1] != 2:
         raise ValueError(f"{path}: expected two columns (wavelength value), got {data.shape[1]}")
     return data[:, 0], data[:, 1]

@@ -11,7 +11,6 @@ needs it to weight emitter hits by MIS.
 
 from __future__ import annotations
 
-
 import drjit as dr
 import mitsuba as mi
 import numpy as np

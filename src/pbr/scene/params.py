@@ -30,15 +30,11 @@ def param_table(values) -> "mi.Float":
     gather from a one-entry array into a broadcast of its value, which a recording keeps
     as the value it had when recorded."""
     values = list(values) + [0.0] * (2 - len(values))
-    if dr.flag(dr.JitFlag.FreezingScope):
-        table = dr.zeros(mi.Float, len(values))
-        for i, v in enumerate(values):
-            dr.scatter(table, mi.Float(v), mi.UInt32(i))
-        return table
-    plain = [v if isinstance(v, (int, float)) else 0.0 for v in values]
-    table = mi.Float(plain)
+    recording = dr.flag(dr.JitFlag.FreezingScope)
+    table = (dr.zeros(mi.Float, len(values)) if recording
+             else mi.Float([v if isinstance(v, (int, float)) else 0.0 for v in values]))
     for i, v in enumerate(values):
-        if not isinstance(v, (int, float)):
+        if recording or not isinstance(v, (int, float)):
             dr.scatter(table, mi.Float(v), mi.UInt32(i))
     return table
 
@@ -100,18 +96,24 @@ class SceneParameters:
         ``dr.enable_grad(params[k])``), the whole scene is rebuilt."""
         for k, v in (values or {}).items():
             self[k] = v
+        # Values-only refreshes that cover every changed key (None: a rebuild is needed).
         tex = self.scene.textures
         slot_of = {id(t): i for i, t in enumerate(tex.items)}
         family_of = {id(o): f for f in self.scene.bsdfs.families.values()
                      if hasattr(f, "refresh_params") for o in f.param_owners()}
-        owners = [self._owners[k][0] for k in self._dirty]
-        textures = [o for o in owners if slot_of.get(id(o)) in self.scene.bsdf_slots and tex.refreshable(o)]
-        families = {id(family_of[id(o)]): family_of[id(o)] for o in owners if id(o) in family_of}
-        if owners and len(textures) + sum(id(o) in family_of for o in owners) == len(owners):
-            if textures:
-                tex.refresh()
-            for f in families.values():
-                f.refresh_params()
+        refreshes = set() if self._dirty else None
+        for k in self._dirty:
+            o = self._owners[k][0]
+            if slot_of.get(id(o)) in self.scene.bsdf_slots and tex.refreshable(o):
+                refreshes.add(tex.refresh)
+            elif id(o) in family_of:
+                refreshes.add(family_of[id(o)].refresh_params)
+            else:
+                refreshes = None
+                break
+        if refreshes is not None:
+            for refresh in refreshes:
+                refresh()
         else:
             if dr.flag(dr.JitFlag.FreezingScope):
                 raise RuntimeError(
