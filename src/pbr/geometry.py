@@ -1,9 +1,17 @@
 """The bridge to Mitsuba's ray tracer (Embree on the CPU, OptiX on CUDA).
 
 pbr hands its shapes to Mitsuba (``optimize=False`` keeps one Mitsuba shape per pbr
-shape, so ``shape_index`` of a hit indexes pbr's own material/light tables) and uses
-only intersection, surface-interaction and shape-sampling queries. Meshes from files
-are read with trimesh and given to Mitsuba as ``mi.Mesh`` objects.
+shape) and uses only intersection, surface-interaction and shape-sampling queries.
+Meshes from files are read with trimesh and given to Mitsuba as ``mi.Mesh`` objects.
+
+A hit is mapped to pbr's shape (which indexes pbr's material, light and medium tables)
+through the hit's shape pointer, which both ray tracers fill in: in Mitsuba's JIT
+variants it holds the shape's Dr.Jit registry id. ``PreliminaryIntersection.shape_index``
+is not used: Embree fills it in, OptiX leaves it 0 (Mitsuba 3.9's
+``scene_optix.inl``). Registry ids follow the order in which Mitsuba objects were
+created (shapes built on several threads, meshes read before the scene, slots freed by
+earlier scenes), not the scene's shape order, so the map is a table built from
+``Scene.shapes_dr()``.
 """
 
 from __future__ import annotations
@@ -14,6 +22,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from . import dispatch
 from .scene.props import Props, SceneError
 
 # Parameters each shape type understands (beyond bsdf/emitter/id).
@@ -127,8 +136,15 @@ def shape_to_mitsuba(props: Props, resolve_path):
     return d
 
 
+#: pbr shape index of registry ids that belong to no shape of the scene (0 is a miss).
+NO_SHAPE = 0xFFFFFFFF
+
+
 class Geometry:
-    """Mitsuba scene holding the shapes; ray queries for the integrators."""
+    """Mitsuba scene holding the shapes; ray queries for the integrators.
+
+    ``mi_index[i]`` is pbr shape ``i``'s position in ``mi_scene.shapes()`` (and
+    ``shapes_dr()``); ``shape_of_id`` maps a shape's registry id to its pbr index."""
 
     def __init__(self, shapes: list):
         d = {"type": "scene"}
@@ -138,26 +154,52 @@ class Geometry:
             self.mi_scene = mi.load_dict(d, optimize=False)
         except Exception as e:
             raise SceneError(f"scene: Mitsuba could not build the geometry: {e}") from None
-        if len(self.mi_scene.shapes()) != len(shapes):
-            raise SceneError("scene: internal error: shape count mismatch in geometry")
-        ids = [s.id() for s in self.mi_scene.shapes()]
-        order = {name: i for i, name in enumerate(ids)}
-        # Mitsuba may reorder shapes; map its shape_index to pbr's shape order.
-        perm = [int(name.split("_")[-1]) if name.startswith("shape_") else i for i, name in enumerate(ids)]
-        self.to_pbr_shape = mi.UInt32(perm)
-        self._identity = perm == list(range(len(perm)))
-        del order
-        self._curve_ends(self.mi_scene.shapes())
+        mi_shapes = self.mi_scene.shapes()
+        # Mitsuba names each shape by its key (objects built beforehand too); its order
+        # is the dict's, but the map does not rely on that.
+        names = [s.id() for s in mi_shapes]
+        if sorted(names) != sorted(d.keys() - {"type"}):
+            raise SceneError("scene: internal error: Mitsuba's shapes differ from pbr's")
+        to_pbr = np.array([int(name.split("_")[-1]) for name in names], dtype=np.int64)
+        self.mi_index = np.empty_like(to_pbr)
+        self.mi_index[to_pbr] = np.arange(len(to_pbr))
+        reg = np.array(dr.reinterpret_array(mi.UInt32, self.mi_scene.shapes_dr()), dtype=np.int64)
+        table = np.full(int(reg.max(initial=0)) + 1, NO_SHAPE, dtype=np.uint32)
+        table[reg] = to_pbr
+        self.shape_of_id = mi.UInt32(table)
+        self._curve_ends([mi_shapes[k] for k in self.mi_index])
 
-    def _curve_ends(self, mi_shapes):
+    def mi_shape(self, i: int):
+        """Mitsuba's shape object of pbr shape ``i``."""
+        return self.mi_scene.shapes()[int(self.mi_index[i])]
+
+    def sample_position(self, shapes: list, k, time, u, active):
+        """Mitsuba's ``sample_position`` on pbr shape ``shapes[k]`` per lane (``shapes``: a
+        list of pbr shape indices): a direct call per listed shape, chosen by a switch. A
+        call through shape pointers (``mi.ShapePtr``) would be traced for every shape of
+        the variant alive in the process (other scenes' too), and fails on curves, which
+        do not implement ``sample_position``."""
+        fns = [(lambda t, u_, on, s=self.mi_shape(i): s.sample_position(t, u_, on)) for i in shapes]
+        time = mi.Float(time)
+        if len(fns) == 1:
+            return fns[0](time, u, active)
+        return dispatch.switch(k, fns, time, u, active)
+
+    def shape_of(self, shape_ptr, active):
+        """pbr shape index of Mitsuba shape pointers (``pi.shape``, ``si.shape``): 0
+        where ``active`` is false or there is no shape (a miss)."""
+        reg = dr.reinterpret_array(mi.UInt32, shape_ptr)
+        return dr.gather(mi.UInt32, self.shape_of_id, reg, active & (reg != 0))
+
+    def _curve_ends(self, shapes):
         """Work around a Mitsuba 3.9 ``bsplinecurve`` bug: its shading partials look up
         segment floor(v * N) from the global curve parameter v = (v_local + i) / N, which
         rounds to 1 near the end of the last segment (i = N - 1), and then read past the
         segment table (measured: rare segfaults). Hits on that segment keep v_local below
         1 - N 2^-21, which keeps floor(v N) <= N - 1 in float32 (a shift < 1e-4 of the
-        last segment for N < 200 segments)."""
+        last segment for N < 200 segments). ``shapes`` are in pbr's order."""
         last, vmax = [], []
-        for s in mi_shapes:
+        for s in shapes:
             curve = s.shape_type() == int(mi.ShapeType.BSplineCurve)
             n = s.primitive_count() if curve else 0
             last.append(n - 1 if curve else 0xFFFFFFFF)
@@ -168,16 +210,18 @@ class Geometry:
             self.curve_v_max = mi.Float(vmax)
 
     def intersect(self, ray: mi.Ray3f, active):
-        """(surface interaction, pbr shape index) of the closest hit."""
+        """(surface interaction, pbr shape index) of the closest hit (shape 0 on a miss:
+        test ``si.is_valid()``)."""
         pi = self.mi_scene.ray_intersect_preliminary(ray, False, active)
+        hit = active & pi.is_valid()
+        shape = self.shape_of(pi.shape, hit)
         if self._curves:
-            end = active & (pi.prim_index == dr.gather(mi.UInt32, self.curve_last_segment, pi.shape_index, active))
-            v = dr.minimum(pi.prim_uv.x, dr.gather(mi.Float, self.curve_v_max, pi.shape_index, end))
+            end = hit & (pi.prim_index == dr.gather(mi.UInt32, self.curve_last_segment, shape, hit))
+            v = dr.minimum(pi.prim_uv.x, dr.gather(mi.Float, self.curve_v_max, shape, end))
             pi.prim_uv = mi.Point2f(dr.select(end, v, pi.prim_uv.x), pi.prim_uv.y)
         # RayFlags.All is Mitsuba's default (uv, dp/du, shading frame; no normal partials):
         # the shading frame's tangent follows dp/du, which anisotropic BSDFs rely on.
         si = pi.compute_surface_interaction(ray, mi.RayFlags.All, active)
-        shape = pi.shape_index if self._identity else dr.gather(mi.UInt32, self.to_pbr_shape, pi.shape_index, active)
         return si, shape
 
     def unoccluded(self, si, p: mi.Point3f, active):

@@ -8,8 +8,8 @@ matters. A triangle is sampled uniformly by area with pbr's own code from the me
 vertex arrays; the light of a hit on such a mesh is the mesh's first light plus the hit's
 ``prim_index`` (:meth:`pbr.lights.LightSet.light_of_hit`). Other shapes are one light
 each: a rectangle is sampled uniformly by pbr's code from its corners (so that scenes with
-many emitting rectangles need no virtual call over all shapes), disks, spheres and
-cylinders through Mitsuba's ``shape.sample_position``. Either way the solid-angle
+many emitting rectangles need no call per shape), disks, spheres and cylinders through
+Mitsuba's ``shape.sample_position``. Either way the solid-angle
 density of a point is ``dist^2 / (|cos theta_g| A)`` with the geometric normal; the side
 that emits follows the shading normal (as the radiance seen at a hit does). Normals
 follow Mitsuba's orientation (``flip_normals`` on Mitsuba's own meshes flips the normals,
@@ -100,17 +100,14 @@ class AreaLight(LightType):
 
     def build(self, scene) -> None:
         shapes = scene.mi_scene.shapes()
-        # pbr shape index -> Mitsuba's shape order (Mitsuba may reorder shapes).
-        to_pbr = np.array(scene.geometry.to_pbr_shape, dtype=np.int64)
-        to_mi = np.empty_like(to_pbr)
-        to_mi[to_pbr] = np.arange(len(to_pbr))
         consts = [scene.textures.constant_value(inst["radiance"]) for inst in self.instances]
         self._count, self._first, self._mesh = [], [], []
         self._power, self._bounds = [], []
-        cols = {k: [] for k in ("radiance", "area", "mi_shape", "kind", "P", "n", "vn", "uv")}
+        cols = {k: [] for k in ("radiance", "area", "other", "kind", "P", "n", "vn", "uv")}
+        self.other_shapes = []        # pbr shapes of the MITSUBA sub-lights
         o = 0
         for inst, L in zip(self.instances, consts):
-            k = int(to_mi[inst["shape"]])
+            k = int(scene.geometry.mi_index[inst["shape"]])   # its place in Mitsuba's shapes()
             shape = shapes[k]
             if _is_triangle_mesh(shape):
                 v, f, vn, uv = _mesh_arrays(shape)
@@ -166,7 +163,10 @@ class AreaLight(LightType):
             self._power.append(phi)
             cols["area"].append(A)
             cols["radiance"].append(np.full(c, inst["radiance"]))
-            cols["mi_shape"].append(np.full(c, k))
+            mitsuba = cols["kind"][-1][0] == MITSUBA
+            if mitsuba:
+                self.other_shapes.append(inst["shape"])
+            cols["other"].append(np.full(c, len(self.other_shapes) - 1 if mitsuba else 0))
             self._count.append(c)
             self._first.append(o)
             o += c
@@ -180,8 +180,8 @@ class AreaLight(LightType):
         kind = cat["kind"]
         self.kinds = sorted(set(int(x) for x in np.unique(kind)))
         self.kind = mi.UInt32(kind.astype(np.uint32))
-        self.shape_ptrs = scene.mi_scene.shapes_dr()
-        self.mi_shape = mi.UInt32(cat["mi_shape"].astype(np.uint32))
+        self.geometry = scene.geometry
+        self.other = mi.UInt32(cat["other"].astype(np.uint32))
 
         def points(a):                        # (n, 3) -> Point3f
             return mi.Point3f(*[mi.Float(np.ascontiguousarray(a[:, j], dtype=f32)) for j in range(3)])
@@ -245,11 +245,11 @@ class AreaLight(LightType):
         if planar:
             p, ng, ns, uv = self._sample_planar(idx, u, active)
         if MITSUBA in self.kinds:
-            # Other shapes through Mitsuba (a virtual call over the scene's shapes).
+            # Other shapes through Mitsuba's sample_position.
             other = (dr.gather(mi.UInt32, self.kind, idx, active) == MITSUBA) if planar else mi.Bool(True)
             on = active & other
-            shape = dr.gather(mi.ShapePtr, self.shape_ptrs, dr.gather(mi.UInt32, self.mi_shape, idx, on), on)
-            ps = shape.sample_position(time, u, on)
+            k = dr.gather(mi.UInt32, self.other, idx, on)
+            ps = self.geometry.sample_position(self.other_shapes, k, time, u, on)
             if planar:
                 p, ng, ns, uv = (dr.select(other, a, b) for a, b in ((ps.p, p), (ps.n, ng), (ps.n, ns), (ps.uv, uv)))
             else:

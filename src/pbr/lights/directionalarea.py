@@ -42,12 +42,6 @@ class DirectionalAreaLight(LightType):
         return len(self.instances) - 1
 
     @staticmethod
-    def _mi_shape(scene, pbr_index: int):
-        """Mitsuba's shape for pbr shape ``pbr_index`` (Mitsuba may reorder shapes)."""
-        to_pbr = np.array(scene.geometry.to_pbr_shape, dtype=np.int64)
-        return scene.mi_scene.shapes()[int(np.flatnonzero(to_pbr == pbr_index)[0])]
-
-    @staticmethod
     def _plane(shape):
         """(normal, point, planar) from positions sampled over the shape."""
         k = 16
@@ -66,7 +60,7 @@ class DirectionalAreaLight(LightType):
         normals, points, planar = [], [], []
         self._area = []
         for inst in self.instances:
-            sh = self._mi_shape(scene, inst["shape"])
+            sh = scene.geometry.mi_shape(inst["shape"])
             n, p, ok = self._plane(sh)
             if not ok:
                 warnings.warn(f"{inst['id']}: directionalarea on a non-planar shape is not sampled by "
@@ -90,7 +84,7 @@ class DirectionalAreaLight(LightType):
     def bounds(self, i: int, scene):
         """pbrt-v4 LightBounds: the shape's box, the emission direction (the normal), the
         power, and (nearly) zero-width cones of normals and emission directions."""
-        bb = self._mi_shape(scene, self.instances[i]["shape"]).bbox()
+        bb = scene.geometry.mi_shape(self.instances[i]["shape"]).bbox()
         eps = float(np.cos(1e-3))   # a hair of slack against rounding in the BVH's cone tests
         return {"p_min": np.array(bb.min, dtype=np.float64), "p_max": np.array(bb.max, dtype=np.float64),
                 "phi": self.power(i, scene), "w": self._normals[i], "cos_theta_o": eps, "cos_theta_e": eps,
@@ -118,18 +112,10 @@ class DirectionalAreaLight(LightType):
     # -- emission (light tracing) ----------------------------------------------------------
     emits_rays = True
 
-    def _shape(self, idx, active):
-        """Mitsuba's shape of instance ``idx`` (for ``sample_position``)."""
-        to_pbr = np.array(self.geometry.to_pbr_shape, dtype=np.int64)
-        mi_index = mi.UInt32([int(np.flatnonzero(to_pbr == i["shape"])[0]) for i in self.instances])
-        k = dr.gather(mi.UInt32, mi_index, idx, active)
-        return dr.gather(mi.ShapePtr, self.geometry.mi_scene.shapes_dr(), k, active)
-
     def sample_Le(self, idx, u_pos, u_dir, wl, active) -> LeSample:
         """A uniform point of the shape (by area) and the ray along its normal (Mitsuba's
         ``sample_ray``): ``pdf_pos = 1 / area``, a delta in direction."""
-        shape = self._shape(idx, active)
-        ps = shape.sample_position(0.0, u_pos, active)
+        ps = self.geometry.sample_position([i["shape"] for i in self.instances], idx, 0.0, u_pos, active)
         area = dr.gather(mi.Float, mi.Float(self._area), idx, active)
         ok = active & (area > 0)
         slot = dr.gather(mi.UInt32, self.radiance, idx, ok)

@@ -75,15 +75,12 @@ class Patches:
 
     def __init__(self, scene, max_area: float = 0.0, shape_paths=None):
         shapes = scene.mi_scene.shapes()
-        to_pbr = np.array(scene.geometry.to_pbr_shape, dtype=np.int64)
-        to_mi = np.empty_like(to_pbr)
-        to_mi[to_pbr] = np.arange(len(to_pbr))
-        self.mi_index = to_mi
+        to_mi = self.mi_index = scene.geometry.mi_index
         cols = {k: [] for k in ("p", "normal", "area", "shape", "prim", "bary", "key")}
         tri_n, tri_off, shape_tri = [], [], []
         TP = []
         n_patch = n_tri = 0
-        for s in range(len(to_pbr)):
+        for s in range(len(to_mi)):
             shape = shapes[int(to_mi[s])]
             if not shape.is_mesh():
                 where = shape_paths[s] if shape_paths else f"scene.{scene.shape_ids[s]}"
@@ -222,7 +219,6 @@ class Patches:
             pi.t = dr.full(mi.Float, 1.0, m)
             pi.prim_uv = _vec(mi.Point2f, self.bary[idx])
             pi.prim_index = mi.UInt32(self.prim[idx].astype(np.uint32))
-            pi.shape_index = dr.full(mi.UInt32, int(self.mi_index[s]), m)
             ray = mi.Ray3f(_vec(mi.Point3f, self.centroid[idx] + self.normal[idx]),
                            _vec(mi.Vector3f, -self.normal[idx]))
             si = shape.compute_surface_interaction(ray, pi, int(mi.RayFlags.All), True)
