@@ -2,7 +2,8 @@
 update) in pbr vs Mitsuba 3's ``prb``, on the same scene, spp and process.
 
 The scene is the albedo-texture example's (Cornell box, back wall with an RGB bitmap;
-examples/optimize_albedo_texture.py), Mitsuba variant ``llvm_ad_spectral``. The
+examples/optimize_albedo_texture.py), on ``--backend`` (``llvm`` default, or ``cuda``)
+with Mitsuba's variant of the same backend (``{llvm,cuda}_ad_spectral``). The
 parameter (``--param``) is the bitmap's texels (``texture``, default) or the red wall's
 RGB albedo (``albedo``, ``red.reflectance.value``). Reported per renderer, after
 ``--warmup`` iterations:
@@ -106,7 +107,7 @@ class Optimisation:
 
 def measure_memory(o: Optimisation):
     """Of one warm iteration: Dr.Jit allocator peak (MiB), kernel launches, kernel-cache
-    misses, and the time spent compiling kernels (ms; codegen + LLVM, from the kernel
+    misses, and the time spent compiling kernels (ms; codegen + backend compiler, from the kernel
     history)."""
     dr.flush_malloc_cache()
     dr.detail.malloc_clear_statistics()
@@ -117,7 +118,7 @@ def measure_memory(o: Optimisation):
     dr.set_flag(dr.JitFlag.KernelHistory, False)
     hist = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
     l1 = dr.detail.launch_stats()
-    peak = dr.detail.malloc_watermark(dr.JitBackend.LLVM) / 2 ** 20
+    peak = dr.detail.malloc_watermark(dr.backend_v(mi.Float)) / 2 ** 20
     compile_ms = sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in hist)
     return peak, l1[0] - l0[0], (l1[1] - l0[1]) + (l1[2] - l0[2]), compile_ms
 
@@ -169,7 +170,7 @@ def child(a):
 def run_child(a, what: str, name: str) -> dict:
     args = [sys.executable, os.path.abspath(__file__), "--child", f"{what}:{name}",
             "--res", str(a.res), "--spp", str(a.spp), "--texels", str(a.texels), "--param", a.param,
-            "--reps", str(a.reps), "--warmup", str(a.warmup)]
+            "--reps", str(a.reps), "--warmup", str(a.warmup), "--backend", a.backend]
     p = subprocess.run(args, capture_output=True, text=True, timeout=1800)
     for line in p.stdout.splitlines():
         if line.startswith("RESULT "):
@@ -188,10 +189,11 @@ def main(argv=None):
     ap.add_argument("--param", choices=sorted(KEYS), default="texture")
     ap.add_argument("--reps", type=int, default=7)
     ap.add_argument("--warmup", type=int, default=3)
+    ap.add_argument("--backend", default="llvm", help="llvm, cuda or auto")
     ap.add_argument("--no-children", action="store_true", help="skip the RSS and dr.freeze child runs")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
-    pbr.set_backend("llvm")
+    pbr.set_backend(a.backend)
     if a.child:
         return child(a)
 
@@ -218,7 +220,7 @@ def main(argv=None):
     mi_s = stats["mitsuba/prb"]
     what = f"back-wall texture {a.texels}x{a.texels}" if a.param == "texture" else "red wall albedo"
     print(f"One optimisation iteration: Cornell box {a.res}x{a.res}, {a.spp} spp, parameter {what} "
-          f"(render + backward + Adam + clamp + update), LLVM, median of {a.reps} after {a.warmup} warm-up")
+          f"(render + backward + Adam + clamp + update), {pbr.get_backend()}, median of {a.reps} after {a.warmup} warm-up")
     for k, s in stats.items():
         line = (f"  {k:12s} time {s['time_s'] * 1e3:7.1f} ms (compiling kernels {s['compile_ms']:.0f} ms)   "
                 f"Dr.Jit peak {s['peak_mib']:6.2f} MiB   kernels {s['launches']:3d} (cache misses {s['misses']})")

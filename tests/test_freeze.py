@@ -34,7 +34,6 @@ def _roughness_ior_case(res=24):
 
 
 def _setup(case):
-    pbr.set_backend("llvm")
     d, init, bounds = case()
     scene = pbr.load_dict(d)
     ref = pbr.render(scene, spp=4, seed=1 << 20)
@@ -94,7 +93,6 @@ def test_frozen_steps_replay_the_unfrozen_ones(case):
 
 @pytest.mark.parametrize("case", [_texture_case, _roughness_ior_case], ids=["texture", "roughness_ior"])
 def test_values_only_update_equals_a_rebuild(case):
-    pbr.set_backend("llvm")
     images = []
     for full in (False, True):
         d, init, _ = case(res=16)
@@ -115,7 +113,6 @@ def test_values_only_update_equals_a_rebuild(case):
 def test_update_needing_a_rebuild_inside_freeze_is_refused():
     """A light's radiance feeds the light sampler's power estimates, computed on the host:
     a clear error, not a crash in the recording."""
-    pbr.set_backend("llvm")
     scene = pbr.load_dict(pbr.cornell_box())
     key = "light.emitter.radiance.value"
     value = pbr.traverse(scene)[key] * 2.0
@@ -134,7 +131,6 @@ def test_update_needing_a_rebuild_inside_freeze_is_refused():
 
 
 def test_seed_must_be_an_int_or_a_uint32():
-    pbr.set_backend("llvm")
     scene = pbr.load_dict(pbr.cornell_box())
     with pytest.raises(TypeError, match="seed"):
         pbr.render(scene, spp=1, seed=mi.Float(1.0))

@@ -3,7 +3,7 @@ import builtins
 import struct
 import zlib
 
-import pbr  # noqa: F401  (configures libLLVM before Dr.Jit)
+import pbr  # (first: configures libLLVM before Dr.Jit)
 import numpy as np
 import pytest
 
@@ -91,11 +91,16 @@ def test_exr_grey_and_rgba(tmp_path):
     np.testing.assert_array_equal(read_image(tmp_path / "a.exr"), rgba)
 
 
-def test_exr_from_drjit_tensor(tmp_path):
+def _tensor_types():
+    """Dr.Jit's (AD, plain) tensor types of the backend the tests run on."""
     import drjit as dr
+    mod = getattr(dr, pbr.get_backend())
+    return mod.ad.TensorXf, mod.TensorXf
 
+
+def test_exr_from_drjit_tensor(tmp_path):
     arr = np.random.default_rng(3).random((4, 6, 3)).astype(np.float32)
-    write_image(tmp_path / "t.exr", dr.llvm.ad.TensorXf(arr))
+    write_image(tmp_path / "t.exr", _tensor_types()[0](arr))
     np.testing.assert_array_equal(read_image(tmp_path / "t.exr"), arr)
 
 
@@ -211,22 +216,21 @@ class _FakeShell:
 
 
 def test_register_ipython_display(monkeypatch):
-    import drjit as dr
-
     monkeypatch.setattr(image, "_get_ipython", lambda: None)
     assert register_ipython_display() is False
 
     shell = _FakeShell()
     monkeypatch.setattr(image, "_get_ipython", lambda: shell)
     assert register_ipython_display() is True
-    assert dr.llvm.ad.TensorXf in shell.png.types and dr.llvm.TensorXf in shell.png.types
-    fmt = shell.png.types[dr.llvm.ad.TensorXf]
+    ad_tensor, tensor = _tensor_types()
+    assert ad_tensor in shell.png.types and tensor in shell.png.types
+    fmt = shell.png.types[ad_tensor]
     arr = np.random.default_rng(5).random((3, 4, 3)).astype(np.float32)
-    data = fmt(dr.llvm.ad.TensorXf(arr))
+    data = fmt(ad_tensor(arr))
     assert data == to_png_bytes(arr)
     assert _png_pixels(data).shape == (3, 4, 3)
-    assert fmt(dr.llvm.ad.TensorXf(np.zeros((3, 4), np.float32))) is None
-    assert fmt(dr.llvm.ad.TensorXf(np.zeros(7, np.float32))) is None
+    assert fmt(ad_tensor(np.zeros((3, 4), np.float32))) is None
+    assert fmt(ad_tensor(np.zeros(7, np.float32))) is None
 
 
 def test_get_ipython_from_builtins(monkeypatch):

@@ -10,7 +10,7 @@ import mitsuba as mi
 
 from pbr.scene.xml import XMLError, parse_file, parse_string
 
-mi.set_variant("llvm_ad_spectral")
+# Mitsuba's variant is pbr's (conftest selects PBR_TEST_BACKEND's before this import).
 
 CORNELL = """<?xml version="1.0"?>
 <scene version="3.0.0">

@@ -228,22 +228,17 @@ def compare_renders(fn_a: Callable, fn_b: Callable, spp: int, batches: int = 16,
 
 
 def mitsuba_variant() -> str:
-    """Select and return the Mitsuba variant matching pbr's backend (default LLVM).
+    """Select and return the Mitsuba variant of pbr's backend (``llvm_ad_spectral`` or
+    ``cuda_ad_spectral``), selecting pbr's default backend if none is active.
 
-    pbr runs on Mitsuba's ``{llvm,cuda}_ad_spectral`` types, so the reference must use
-    the same variant as pbr or it would switch pbr's types under it.
+    pbr runs on that variant's types, so a reference rendered in another variant would
+    switch pbr's types under it (and compare a CPU render with a GPU one). An unusable
+    backend raises :class:`pbr.BackendError`; there is no silent fallback.
     """
-    import mitsuba as mi
     from . import backend as _backend
 
-    try:
-        b = getattr(_backend, "backend")()
-    except Exception:
-        b = "llvm"
-    v = "cuda_ad_spectral" if b == "cuda" else "llvm_ad_spectral"
-    if mi.variant() != v:
-        mi.set_variant(v)
-    return v
+    _backend.ensure()
+    return _backend.variant()
 
 
 def mitsuba_render_fn(scene_dict: dict, sensor: int = 0) -> Callable[..., np.ndarray]:
