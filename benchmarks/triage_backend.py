@@ -91,7 +91,7 @@ def child(a) -> None:
 
 
 def run_case(a, case: str, flag: str) -> dict:
-    args = [sys.executable, os.path.abspath(__file__), "--child", case, "--flag", flag, "--backend", a.backend,
+    args = [sys.executable, os.path.abspath(__file__), "--child", case, f"--flag={flag}", "--backend", a.backend,
             "--res", str(a.res), "--spp", str(a.spp)]
     t = time.perf_counter()
     try:
@@ -118,7 +118,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--backend", default="llvm", help="llvm, cuda or auto")
     ap.add_argument("--cases", default=",".join(CASES), help=f"comma-separated, from {', '.join(CASES)}")
-    ap.add_argument("--flags", default="", help=f"'all' ({', '.join(FLAG_SETS)}) or comma-separated")
+    ap.add_argument("--flags", default="", help=f"comma-separated; 'all' = {', '.join(FLAG_SETS)}")
     ap.add_argument("--res", type=int, default=32)
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--timeout", type=int, default=300, help="seconds per case")
@@ -132,7 +132,9 @@ def main(argv=None):
     bad = [c for c in cases if c not in CASES]
     if bad:
         ap.error(f"unknown case(s) {bad}; known: {', '.join(CASES)}")
-    flags = [""] + (FLAG_SETS if a.flags == "all" else [f for f in a.flags.split(",") if f])
+    flags = [""]
+    for f in filter(None, a.flags.split(",")):
+        flags += FLAG_SETS if f == "all" else [f]
     results = []
     print(f"backend {a.backend}, {a.res}x{a.res}, {a.spp} spp")
     for flag in flags:

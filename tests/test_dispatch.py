@@ -37,3 +37,27 @@ def test_per_lane_dispatch_renders_the_same_image_as_the_switch():
         b = np.asarray(pbr.render(scene, spp=16, seed=3))
     assert a.mean() > 1e-3
     assert np.allclose(a, b, rtol=1e-4, atol=1e-6), np.abs(a - b).max()
+
+
+def test_light_family_that_traces_rays_is_called_outside_the_switch():
+    """``directionalarea`` traces a ray in ``sample_Li``, so the light switch calls it on
+    its own lanes (OptiX forbids tracing inside the callables of a switch; see
+    test_no_rays_in_calls.py). The image equals the per-lane dispatch's, and the light
+    contributes."""
+    import mitsuba as mi
+    T = mi.ScalarTransform4f
+    d = pbr.cornell_box(16, 16)
+    d["point"] = {"type": "point", "position": [0.2, 0.7, 0.6], "intensity": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}
+
+    def with_panel(radiance):
+        d["panel"] = {"type": "rectangle", "to_world": T().translate([0, 0.9, 0]).rotate([1, 0, 0], 90).scale(0.3),
+                      "emitter": {"type": "directionalarea", "radiance": {"type": "rgb", "value": [radiance] * 3}}}
+        return pbr.load_dict(d)
+    without = np.asarray(pbr.render(with_panel(0.0), spp=16, seed=3))
+    scene = with_panel(20.0)
+    assert sorted(scene.lights.order) == ["area", "directionalarea", "point"]
+    a = np.asarray(pbr.render(scene, spp=16, seed=3))
+    with dispatch.by_lane():
+        b = np.asarray(pbr.render(scene, spp=16, seed=3))
+    assert np.allclose(a, b, rtol=1e-4, atol=1e-6), np.abs(a - b).max()
+    assert a.mean() > 1.2 * without.mean()

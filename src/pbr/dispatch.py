@@ -36,8 +36,14 @@ def branching() -> bool:
     return not _by_lane
 
 
-def switch(index, fns, *args):
-    """``fns[index](*args)`` per lane; the last of ``args`` is the ``active`` mask."""
+def switch(index, fns, *args, outside=()):
+    """``fns[index](*args)`` per lane; the last of ``args`` is the ``active`` mask.
+
+    ``outside``: indices of functions that trace rays. They are called on their own lanes
+    outside the symbolic call: on CUDA, Dr.Jit compiles a symbolic call over several
+    functions into OptiX *direct callables*, in which OptiX does not allow ray tracing."""
+    if outside and not _by_lane:
+        return _switch_outside(index, fns, args, outside)
     if not _by_lane:
         return dr.switch(index, fns, *args)
     *rest, active = args
@@ -47,6 +53,22 @@ def switch(index, fns, *args):
         r = fn(*rest, mine)
         out = r if out is None else _select(mine, r, out)
     return _select(active, out, None)
+
+
+def _switch_outside(index, fns, args, outside):
+    *rest, active = args
+    inside = [k for k in range(len(fns)) if k not in outside]
+    out = None
+    if inside:
+        on = active
+        for k in outside:
+            on = on & (index != k)
+        remap = type(index)([inside.index(k) if k in inside else 0 for k in range(len(fns))])
+        out = dr.switch(dr.gather(type(index), remap, index, on), [fns[k] for k in inside], *rest, on)
+    for k in outside:
+        mine = active & (index == k)
+        out = _select(mine, fns[k](*rest, mine), out)
+    return out
 
 
 def _select(mask, a, b):

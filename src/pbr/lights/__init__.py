@@ -106,7 +106,9 @@ class LightSet:
         if len(fams) == 1:
             return getattr(fams[0], method)(local, *args, active)
         fam = dr.gather(mi.UInt32, self.family_of, light, active)
-        return dispatch.switch(fam, [_typed(getattr(f, method)) for f in fams], local, *args, active)
+        tracing = [k for k, f in enumerate(fams) if method in f.traces_rays_in]
+        return dispatch.switch(fam, [_typed(getattr(f, method)) for f in fams], local, *args, active,
+                               outside=tracing)
 
     # -- used by integrators -----------------------------------------------------------
     def L(self, light, si, wl, active):

@@ -28,6 +28,7 @@ class LightType:
     delta = False      # Dirac delta in position or direction (no MIS needed)
     infinite = False   # emits along rays that leave the scene (Le)
     textures = None    # the scene's TextureSet, set by LightSet.build
+    traces_rays_in = ()  # methods that trace rays: LightSet calls them outside its dr.switch
 
     def __init__(self):
         self.instances: list = []

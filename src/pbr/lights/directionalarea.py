@@ -30,6 +30,7 @@ class DirectionalAreaLight(LightType):
     name = "directionalarea"
     delta = True
     surface = True     # attached to a shape (as ``area``)
+    traces_rays_in = ("sample_Li",)
 
     def add(self, loader, props, shape_index=None) -> int:
         if shape_index is None:
