@@ -9,8 +9,8 @@ vertex arrays; the light of a hit on such a mesh is the mesh's first light plus 
 ``prim_index`` (:meth:`pbr.lights.LightSet.light_of_hit`). Other shapes are one light
 each: a rectangle is sampled uniformly by pbr's code from its corners (so that scenes with
 many emitting rectangles need no call per shape), disks, spheres and cylinders through
-Mitsuba's ``shape.sample_position``. Either way the solid-angle
-density of a point is ``dist^2 / (|cos theta_g| A)`` with the geometric normal; the side
+Mitsuba's ``shape.sample_position``. Either way the solid-angle density of a point is
+``dist^2 / (|cos theta_g| A)`` with the geometric normal; the side
 that emits follows the shading normal (as the radiance seen at a hit does). Normals
 follow Mitsuba's orientation (``flip_normals`` on Mitsuba's own meshes flips the normals,
 not the winding).
