@@ -35,7 +35,7 @@ def main(argv=None):
     ap.add_argument("--backend", default="llvm")
     a = ap.parse_args(argv)
     pbr.set_backend(a.backend)
-    from pbr.scene.props import Props
+    from pbr.plugins.props import Props
     from pbr.integrators.radiosity import RadiosityIntegrator, solvers
     from pbr.integrators.radiosity.reference import path_at_centroids
 

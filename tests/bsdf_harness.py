@@ -155,7 +155,7 @@ def shared_family_results(bsdfs, wi, wo, samples=None, make=None):
 def assert_scene_error(bsdf: dict, key: str, text: str) -> None:
     """Loading ``bsdf`` raises a SceneError whose message names ``key`` and says ``text``."""
     import pytest
-    from pbr.scene.props import SceneError
+    from pbr.plugins.props import SceneError
     with pytest.raises(SceneError) as e:
         OneBSDF(bsdf)
     assert key in str(e.value) and text in str(e.value), str(e.value)

@@ -18,7 +18,7 @@ import mitsuba as mi
 import pbr
 from pbr import validate
 from pbr.integrators import bdpt as bdpt_mod
-from pbr.scene.props import SceneError
+from pbr.plugins.props import SceneError
 
 RES, SPP, BATCHES = 24, 1024, 16
 

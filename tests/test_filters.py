@@ -8,7 +8,7 @@ import drjit as dr
 import mitsuba as mi
 
 from pbr.filters import FILTERS
-from pbr.scene.props import Props
+from pbr.plugins.props import Props
 
 
 @pytest.mark.parametrize("name", ["box", "tent", "gaussian"])

@@ -30,7 +30,7 @@ import pytest
 import pbr
 from pbr import validate
 from pbr import spectrum as spec
-from pbr.scene.props import Props, SceneError
+from pbr.plugins.props import Props, SceneError
 from pbr.spectrum import SampledWavelengths
 
 RES, SPP, BATCHES = 20, 1024, 16

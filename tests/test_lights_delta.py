@@ -25,7 +25,7 @@ import mitsuba as mi
 import pbr
 from pbr import validate
 from pbr import spectrum as spec
-from pbr.scene.props import SceneError
+from pbr.plugins.props import SceneError
 from pbr.lights.goniometric import equal_area_sphere_to_square, equal_area_square_to_sphere
 from pbr.lights.spot import spot_solid_angle
 

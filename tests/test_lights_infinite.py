@@ -20,7 +20,7 @@ import pytest
 
 import pbr
 from pbr import validate
-from pbr.scene.props import SceneError
+from pbr.plugins.props import SceneError
 from pbr.spectrum import SampledWavelengths
 
 RES, SPP, BATCHES = 24, 1024, 16

@@ -159,7 +159,7 @@ def test_prbvolpath_wrong_albedo_fails():
 
 def test_majorant_grid_changes_cost_not_result(tmp_path, monkeypatch):
     """The 16^3 majorant grid and a single global majorant give the same expectation."""
-    import pbr.media as media
+    import pbr.media.mediumset as media
     vol = str(tmp_path / "blob.vol")
     write_vol(vol, blob())
     d = grid_cube(vol)
@@ -303,7 +303,7 @@ def test_phase_function_sampling_chi2(phase):
 
 
 def test_medium_errors():
-    from pbr.scene.props import SceneError
+    from pbr.plugins.props import SceneError
     bad = [({"type": "homogeneous", "albedo": 1.5}, "albedo"),
            ({"type": "homogeneous", "sigma_t": -1.0}, "sigma_t"),
            ({"type": "homogeneous", "sigma_t": 1.0, "sigma_a": 1.0}, "sigma_a"),

@@ -13,7 +13,7 @@ import pytest
 import pbr
 import mitsuba as mi
 from pbr import validate
-from pbr.scene.props import Props
+from pbr.plugins.props import Props
 from pbr.integrators.radiosity import RadiosityIntegrator, RadiositySolution, solvers
 from pbr.integrators.radiosity import formfactors as ff
 from pbr.integrators.radiosity.bins import WavelengthBins

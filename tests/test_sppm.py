@@ -22,7 +22,7 @@ import pbr
 from pbr import validate
 from pbr import spectrum as spec
 from pbr.integrators.sppm import SPPMIntegrator
-from pbr.scene.props import Props, SceneError
+from pbr.plugins.props import Props, SceneError
 
 RES = 16
 

@@ -15,7 +15,10 @@ import numpy as np
 from .backend import Struct
 from .films import HDRFilm
 from .samplers import SAMPLERS, IndependentSampler
-from .scene.props import Props
+from .plugins.props import Props
+from .plugins.registry import Registry
+
+SENSORS = Registry("sensor")
 
 
 def _x_fov(props: Props, aspect: float) -> float:
@@ -44,6 +47,7 @@ def _x_fov(props: Props, aspect: float) -> float:
     return 2.0 * math.degrees(math.atan(t))
 
 
+@SENSORS.register("perspective")
 class PerspectiveCamera:
     medium = 0  # index + 1 of the medium the camera sits in (0: vacuum)
 
@@ -162,5 +166,3 @@ class CameraWiSample(Struct):
 
     _fields = {"We": "Float", "wi": "Vector3f", "pdf": "Float", "pos": "Point2f", "p": "Point3f", "valid": "Bool"}
 
-
-SENSORS = {"perspective": PerspectiveCamera}

@@ -14,6 +14,8 @@ import time
 
 import numpy as np
 
+import pbr
+
 from .image import TONEMAPS, WRITE_EXTENSIONS, write_image
 
 EXIT_ERROR = 2
@@ -79,8 +81,6 @@ class UsageError(Exception):
 
 def _load(args):
     """Select the backend and load the scene; user errors become :class:`UsageError`."""
-    import pbr
-
     if args.scene is None and args.defines:
         raise UsageError("-D overrides apply to scene files; none given "
                          "(the built-in Cornell box takes no parameters)")
@@ -96,8 +96,6 @@ def _load(args):
 
 
 def _render(args) -> int:
-    import pbr
-
     if args.scene is None:
         name = "cornell"
     else:

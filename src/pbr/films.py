@@ -8,9 +8,13 @@ image only, as Mitsuba's film does."""
 from __future__ import annotations
 
 from .filters import FILTERS, GaussianFilter
-from .scene.props import Props
+from .plugins.props import Props
+from .plugins.registry import Registry
+
+FILMS = Registry("film")
 
 
+@FILMS.register("hdrfilm")
 class HDRFilm:
     def __init__(self, props: Props):
         self.width = props.int("width", 768, min=1)

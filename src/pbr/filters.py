@@ -12,6 +12,10 @@ import math
 import drjit as dr
 import mitsuba as mi
 
+from .plugins.registry import Registry
+
+FILTERS = Registry("rfilter")
+
 
 
 class Filter:
@@ -33,6 +37,7 @@ class Filter:
         return mi.Vector2f(x, y), wx * wy
 
 
+@FILTERS.register("box")
 class BoxFilter(Filter):
     name = "box"
 
@@ -47,6 +52,7 @@ class BoxFilter(Filter):
         return (u - 0.5) * (2.0 * self.radius), mi.Float(1.0)
 
 
+@FILTERS.register("tent")
 class TentFilter(Filter):
     name = "tent"
 
@@ -64,6 +70,7 @@ class TentFilter(Filter):
         return t * self.radius, mi.Float(1.0)
 
 
+@FILTERS.register("gaussian")
 class GaussianFilter(Filter):
     """exp(-x^2 / 2 sigma^2) minus its value at the radius 4 sigma (so it reaches 0)."""
     name = "gaussian"
@@ -89,5 +96,3 @@ class GaussianFilter(Filter):
         g = dr.exp(self._alpha * x * x)
         return x, dr.maximum(0.0, (g - self._bias) / g) * self._norm
 
-
-FILTERS = {"box": BoxFilter, "tent": TentFilter, "gaussian": GaussianFilter}

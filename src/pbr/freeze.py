@@ -26,7 +26,7 @@ import drjit as dr
 from . import spectrum
 from .scene.params import SceneParameters
 from .scene.scene import Scene
-from .scene.tables import map_tables
+from .plugins.tables import map_tables
 
 
 def scene_state(scene: Scene) -> list:

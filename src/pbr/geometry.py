@@ -23,7 +23,8 @@ import mitsuba as mi
 import numpy as np
 
 from . import dispatch
-from .scene.props import Props, SceneError
+from .meshattr import attach, file_attributes
+from .plugins.props import Props, SceneError
 
 # Parameters each shape type understands (beyond bsdf/emitter/id).
 SHAPE_PARAMS = {
@@ -100,7 +101,6 @@ def load_mesh_file(props: Props, path: str) -> "mi.Mesh":
         params.update()
         if n is None and not face_normals:
             m.recompute_vertex_normals()
-    from .meshattr import attach, file_attributes
     attach(m, file_attributes(mesh, props.type, props.key("filename")))
     return m
 

@@ -34,7 +34,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import spectrum as spec
-from .scene.props import SceneError
+from .plugins.props import SceneError
 
 NONE = 0xFFFFFFFF
 # Postfix categories of grouped PLY properties: xyzw, rgba, 0123, 1234 (Mitsuba's ply.h).

@@ -11,6 +11,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from .plugins.registry import Registry
+
 # |g| close to 1 makes the lobe a numerical spike: clamp as pbrt-v4 does.
 G_MAX = 0.99
 
@@ -65,6 +67,28 @@ def rayleigh_sample(wo, u: mi.Point2f):
 
 # Phase function kinds of media (isotropic is HG with g = 0).
 HG, RAYLEIGH = 0, 1
+
+# Type name -> parser of a phase function plugin's Props into (kind, g).
+PHASE_TYPES = Registry("phase")
+
+
+@PHASE_TYPES.register("isotropic")
+def _isotropic(props):
+    """``isotropic``: no parameters (HG with g = 0)."""
+    return HG, 0.0
+
+
+@PHASE_TYPES.register("hg")
+def _henyey_greenstein(props):
+    """``hg``: ``g`` (float, default 0.8), the mean cosine, in [-1, 1] (clamped to
+    +-G_MAX when evaluated)."""
+    return HG, props.float("g", 0.8, min=-1.0, max=1.0)
+
+
+@PHASE_TYPES.register("rayleigh")
+def _rayleigh(props):
+    """``rayleigh``: no parameters."""
+    return RAYLEIGH, 0.0
 
 
 def phase_eval(kind, g, wo, wi, kinds):

@@ -12,7 +12,7 @@ import drjit as dr
 
 from . import backend, dispatch
 from .samplers import seed_array
-from .scene.tables import tables_as_leaves
+from .scene.params import tables_as_leaves, traverse
 
 
 class _RenderOp(dr.CustomOp):
@@ -62,7 +62,6 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
             seed = seed_array(seed)
             seed_grad = dr.select(seed == 0, 0x51ED270B, seed + 0x9E3779B9)
     spp_grad = spp_grad or spp
-    from .scene.params import traverse
     p = params if params is not None else traverse(scene)
     values = {k: v for k, v in p.items() if dr.grad_enabled(v)}
     return dr.custom(_RenderOp, scene, values, sensor, integrator, (seed, seed_grad), (spp, spp_grad))

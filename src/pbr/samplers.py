@@ -11,7 +11,10 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .scene.props import Props
+from .plugins.props import Props
+from .plugins.registry import Registry
+
+SAMPLERS = Registry("sampler")
 
 
 def seed_array(seed) -> mi.UInt32:
@@ -23,6 +26,7 @@ def seed_array(seed) -> mi.UInt32:
     return seed
 
 
+@SAMPLERS.register("independent")
 class IndependentSampler:
     def __init__(self, props: Props | None = None):
         self.sample_count = props.int("sample_count", 4, min=1) if props else 4
@@ -39,5 +43,3 @@ class IndependentSampler:
         rng.seed(mi.UInt64(v0), mi.UInt64(v1))
         return rng
 
-
-SAMPLERS = {"independent": IndependentSampler}

@@ -7,11 +7,13 @@ import os
 import mitsuba as mi
 import numpy as np
 
+from . import backend
+from .bsdfs import bsdf_names
+
 
 def cornell_box(resolution: int = 256, spp: int = 64) -> dict:
     """The Cornell box of ``mi.cornell_box()`` (same geometry, materials, light and
     camera), as a Mitsuba-style scene dict."""
-    from . import backend
     backend.ensure()  # the dict holds Mitsuba transforms, which need a variant
     T = mi.ScalarTransform4f
 
@@ -55,7 +57,6 @@ def glass_caustic(resolution: int = 64, spp: int = 64) -> dict:
     it, out of the camera's view: light reaches the floor under the sphere only through
     the glass (a caustic; it needs max_depth >= 4: camera - floor - glass - glass - light).
     A Mitsuba-style scene dict with a box filter."""
-    from . import backend
     backend.ensure()
     T = mi.ScalarTransform4f
     return {
@@ -115,10 +116,7 @@ GALLERY_MATERIALS = [
 def materials_gallery(resolution: int = 480, spp: int = 64, materials=None) -> dict:
     """A grid of spheres, one per BSDF family (``GALLERY_MATERIALS``; ``hair`` on a tuft of
     fibres instead), on a diffuse floor under an area light: a Mitsuba-style scene dict."""
-    from . import backend
-    from .bsdfs import BSDF_TYPES
-    mats = [m for m in (materials or GALLERY_MATERIALS) if m[1]["type"] in BSDF_TYPES or
-            m[1]["type"] in ("twosided", "mask", "blendbsdf", "mix", "normalmap", "bumpmap")]
+    mats = [m for m in (materials or GALLERY_MATERIALS) if m[1]["type"] in bsdf_names()]
     backend.ensure()
     T = mi.ScalarTransform4f
     cols = 5

@@ -37,7 +37,7 @@ import mitsuba as mi
 from . import dispatch, meshattr
 from . import spectrum as spec
 from .meshattr import MeshAttribute
-from .scene.props import Props, SceneError
+from .plugins.props import Props, SceneError
 
 # Slot kinds.
 CONSTANT, CHECKERBOARD, BITMAP, COMPOSITE, MESH_ATTRIBUTE = 0, 1, 2, 3, 4
@@ -45,6 +45,10 @@ CONSTANT, CHECKERBOARD, BITMAP, COMPOSITE, MESH_ATTRIBUTE = 0, 1, 2, 3, 4
 OP_SCALE, OP_MIX, OP_CHECKER = 0, 1, 2
 # Base spectrum of a constant.
 BASE_ONE, BASE_SIGMOID, BASE_TABLE = 0, 1, 2
+
+# Texture/spectrum plugin types (``mix`` is also a BSDF: see the loader).
+TEXTURE_TYPES = frozenset({"rgb", "spectrum", "blackbody", "d65", "uniform", "checkerboard", "bitmap", "scale",
+                           "mix", "mesh_attribute"})
 
 _TAB_N = int(spec.LAMBDA_MAX - spec.LAMBDA_MIN) + 1  # 1 nm resolution
 

@@ -14,7 +14,11 @@ from __future__ import annotations
 import mitsuba as mi
 
 from ..backend import Struct, VariantStruct
+from ..plugins.registry import Registry
 from ..spectrum import SampledWavelengths
+
+# Type name -> BSDF family (each family registers itself in its module).
+BSDF_TYPES = Registry("BSDF")
 
 # Lobe flags (Python ints: a kernel only contains code for flags a scene has).
 REFLECTION, TRANSMISSION, DIFFUSE, GLOSSY, SPECULAR = 1, 2, 4, 8, 16

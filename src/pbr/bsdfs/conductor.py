@@ -15,7 +15,7 @@ import mitsuba as mi
 
 from ..spectrum import read_spd
 from ..textures import add_tabulated, load_spectrum
-from .base import BSDFType, BSDFSample, REFLECTION, GLOSSY, SPECULAR
+from .base import BSDF_TYPES, BSDFType, BSDFSample, REFLECTION, GLOSSY, SPECULAR
 from .fresnel import fresnel_conductor, reflect, reflect_about
 from .microfacet import Microfacet, GGX, BECKMANN, VariantTable
 
@@ -50,6 +50,7 @@ def _load_eta_k(loader, props):
     return tuple(slots)
 
 
+@BSDF_TYPES.register("conductor")
 class Conductor(BSDFType):
     name = "conductor"
     flags = REFLECTION | SPECULAR
@@ -80,6 +81,7 @@ class Conductor(BSDFType):
         return BSDFSample(reflect(wi), dr.select(ok, 1.0, 0.0), mi.Float(1.0), mi.Bool(True), dr.select(ok, w, 0.0))
 
 
+@BSDF_TYPES.register("roughconductor")
 class RoughConductor(Conductor):
     name = "roughconductor"
     flags = REFLECTION | GLOSSY

@@ -24,8 +24,8 @@ import numpy as np
 
 from ..spectrum import LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, sellmeier_ior
 from ..textures import add_tabulated, load_spectrum
-from ..scene.params import ParamOwner, param_table
-from .base import BSDFSample, BSDFType, GLOSSY, REFLECTION, SPECULAR, TRANSMISSION
+from ..plugins.params import ParamOwner, param_table
+from .base import BSDF_TYPES, BSDFSample, BSDFType, GLOSSY, REFLECTION, SPECULAR, TRANSMISSION
 from .fresnel import fresnel_dielectric, lookup_ior, reflect, reflect_about, refract, refract_about
 from .microfacet import BECKMANN, GGX, Microfacet, VariantTable
 
@@ -239,6 +239,7 @@ class _Dielectric(BSDFType):
         return dr.zeros(mi.Spectrum, n), dr.zeros(mi.Float, n)
 
 
+@BSDF_TYPES.register("dielectric")
 class SmoothDielectric(_Dielectric):
     """``dielectric``: a smooth interface; reflection with probability R (Fresnel),
     refraction otherwise (total internal reflection included: R = 1)."""
@@ -255,6 +256,7 @@ class SmoothDielectric(_Dielectric):
                           dr.select(active & (pdf > 0), weight, 0.0), self._terminates(idx, active))
 
 
+@BSDF_TYPES.register("thindielectric")
 class ThinDielectric(_Dielectric):
     """``thindielectric``: a thin slab with two parallel interfaces (a window pane).
     Inter-reflections inside the slab sum to R' = 2R / (1 + R); light that gets
@@ -276,6 +278,7 @@ class ThinDielectric(_Dielectric):
                           dr.select(active & (pdf > 0), weight, 0.0))
 
 
+@BSDF_TYPES.register("roughdielectric")
 class RoughDielectric(_Dielectric):
     """``roughdielectric``: microfacet reflection and refraction (Walter et al. 2007).
 

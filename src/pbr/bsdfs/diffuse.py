@@ -8,9 +8,10 @@ import mitsuba as mi
 
 from ..sampling import square_to_cosine_hemisphere, cosine_hemisphere_pdf
 from ..textures import load_spectrum
-from .base import BSDFType, BSDFSample, REFLECTION, DIFFUSE
+from .base import BSDF_TYPES, BSDFType, BSDFSample, REFLECTION, DIFFUSE
 
 
+@BSDF_TYPES.register("diffuse")
 class Diffuse(BSDFType):
     name = "diffuse"
     flags = REFLECTION | DIFFUSE

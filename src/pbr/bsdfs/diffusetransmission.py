@@ -22,9 +22,10 @@ import mitsuba as mi
 
 from ..sampling import square_to_cosine_hemisphere, cosine_hemisphere_pdf
 from ..textures import load_spectrum
-from .base import BSDFType, BSDFSample, REFLECTION, TRANSMISSION, DIFFUSE
+from .base import BSDF_TYPES, BSDFType, BSDFSample, REFLECTION, TRANSMISSION, DIFFUSE
 
 
+@BSDF_TYPES.register("diffusetransmission")
 class DiffuseTransmission(BSDFType):
     name = "diffusetransmission"
     flags = REFLECTION | TRANSMISSION | DIFFUSE

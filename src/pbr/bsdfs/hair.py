@@ -62,7 +62,7 @@ import mitsuba as mi
 
 from ..spectrum import rgb_to_coeffs, sigmoid_polynomial
 from ..textures import load_spectrum
-from .base import BSDFType, BSDFSample, REFLECTION, TRANSMISSION, GLOSSY
+from .base import BSDF_TYPES, BSDFType, BSDFSample, REFLECTION, TRANSMISSION, GLOSSY
 from .fresnel import fresnel_dielectric, lookup_ior
 from .principled import _luminance
 
@@ -251,6 +251,7 @@ def _is_number(v) -> bool:
     return isinstance(v, numbers.Real) and not isinstance(v, bool)
 
 
+@BSDF_TYPES.register("hair")
 class Hair(BSDFType):
     name = "hair"
     flags = REFLECTION | TRANSMISSION | GLOSSY

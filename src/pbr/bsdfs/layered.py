@@ -51,11 +51,11 @@ import mitsuba as mi
 
 from .. import dispatch
 from ..phase import hg, hg_pdf, hg_sample
-from ..scene.params import ParamOwner, param_table
+from ..plugins.params import ParamOwner, param_table
 from ..sampling import cosine_hemisphere_pdf, power_heuristic, square_to_cosine_hemisphere
 from ..spectrum import read_spd
 from ..textures import add_tabulated, load_spectrum
-from .base import BSDFSample, BSDFType, DIFFUSE, GLOSSY, REFLECTION, SPECULAR, TRANSMISSION
+from .base import BSDF_TYPES, BSDFSample, BSDFType, DIFFUSE, GLOSSY, REFLECTION, SPECULAR, TRANSMISSION
 from .conductor import _IOR_DIR   # Mitsuba's measured metal data
 from .dielectric import (BOTH, _ior_spectrum, rough_dielectric_eval, rough_dielectric_sample,
                          smooth_dielectric_sample)
@@ -681,6 +681,7 @@ class _Layered(BSDFType):
         return f, pdf, self._sample_dir(ctx, P, u1, u2, active)
 
 
+@BSDF_TYPES.register("coateddiffuse")
 class CoatedDiffuse(_Layered):
     """``coateddiffuse``: a Lambertian base under a dielectric coating (pbrt-v4)."""
 
@@ -707,6 +708,7 @@ def _metal(loader, name: str, comp: str, path: str) -> int:
     return add_tabulated(loader, wl, vals, path)
 
 
+@BSDF_TYPES.register("coatedconductor")
 class CoatedConductor(_Layered):
     """``coatedconductor``: a conductor base under a dielectric coating (pbrt-v4). The
     conductor is ``conductor.eta``/``conductor.k`` (default copper) or, instead, an

@@ -40,7 +40,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .base import BSDFType, BSDFSample, REFLECTION, GLOSSY
+from .base import BSDF_TYPES, BSDFType, BSDFSample, REFLECTION, GLOSSY
 
 # Element types of Mitsuba's tensor files (its Struct type codes).
 _DTYPES = {1: np.uint8, 2: np.int8, 3: np.uint16, 4: np.int16, 5: np.uint32, 6: np.int32,
@@ -221,6 +221,7 @@ def _jacobian(u_x, sin_theta_m, wi_dot_m):
     return dr.maximum(2.0 * dr.square(dr.pi) * u_x * sin_theta_m, 1e-6) * 4.0 * wi_dot_m
 
 
+@BSDF_TYPES.register("measured")
 class Measured(BSDFType):
     name = "measured"
     flags = REFLECTION | GLOSSY

@@ -7,7 +7,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .base import BSDFType, BSDFSample, TRANSMISSION, SPECULAR
+from .base import BSDF_TYPES, BSDFType, BSDFSample, TRANSMISSION, SPECULAR
 
 
 def pass_through(wi, pdf, active) -> BSDFSample:
@@ -16,6 +16,7 @@ def pass_through(wi, pdf, active) -> BSDFSample:
                       dr.select(active, mi.Spectrum(1.0), 0.0))
 
 
+@BSDF_TYPES.register("null")
 class Null(BSDFType):
     name = "null"
     flags = TRANSMISSION | SPECULAR

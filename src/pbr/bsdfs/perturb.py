@@ -11,7 +11,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from ..scene.props import SceneError
+from ..plugins.props import SceneError
+from ..textures import load_spectrum
 
 NORMAL, BUMP = 1, 2
 
@@ -62,7 +63,6 @@ def shadow_terminator(n_local, wo):
 def parse(loader, props, bsdf_like):
     """(kind, texture slot, scale, flip_invalid, shadowing, nested BSDF key) of a
     normalmap/bumpmap dict."""
-    from ..textures import load_spectrum
     kind = NORMAL if props.type == "normalmap" else BUMP
     flip = props.bool("flip_invalid_normals", True)
     shadow = props.bool("use_shadowing_function", True)

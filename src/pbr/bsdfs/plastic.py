@@ -12,10 +12,11 @@ import mitsuba as mi
 
 from ..sampling import square_to_cosine_hemisphere, cosine_hemisphere_pdf
 from ..textures import load_spectrum
-from .base import BSDFType, BSDFSample, REFLECTION, DIFFUSE, SPECULAR
+from .base import BSDF_TYPES, BSDFType, BSDFSample, REFLECTION, DIFFUSE, SPECULAR
 from .fresnel import fresnel_dielectric, fresnel_diffuse_reflectance, lookup_ior, reflect
 
 
+@BSDF_TYPES.register("plastic")
 class Plastic(BSDFType):
     name = "plastic"
     flags = REFLECTION | DIFFUSE | SPECULAR

@@ -64,7 +64,7 @@ import mitsuba as mi
 from ..sampling import cosine_hemisphere_pdf, square_to_cosine_hemisphere
 from ..spectrum import cie_xyz
 from ..textures import load_spectrum
-from .base import BSDFSample, BSDFType, DIFFUSE, GLOSSY, REFLECTION, TRANSMISSION
+from .base import BSDF_TYPES, BSDFSample, BSDFType, DIFFUSE, GLOSSY, REFLECTION, TRANSMISSION
 from .fresnel import fresnel_dielectric, reflect_about, refract_about
 from .microfacet import GGX, Microfacet
 
@@ -248,6 +248,7 @@ class _PrincipledFamily(BSDFType):
 
 # ------------------------------------------------------------------- principled
 
+@BSDF_TYPES.register("principled")
 class Principled(_PrincipledFamily):
     name = "principled"
     flags = REFLECTION | TRANSMISSION | DIFFUSE | GLOSSY
@@ -417,6 +418,7 @@ class Principled(_PrincipledFamily):
 
 # --------------------------------------------------------------- principledthin
 
+@BSDF_TYPES.register("principledthin")
 class PrincipledThin(_PrincipledFamily):
     name = "principledthin"
     flags = REFLECTION | TRANSMISSION | DIFFUSE | GLOSSY

@@ -28,6 +28,8 @@ import struct
 import numpy as np
 import mitsuba as mi
 
+from ..spectrum import cie_tables_np, read_spd
+
 _TYPES = {np.dtype(np.uint8): 1, np.dtype(np.float32): 10, np.dtype(np.float64): 11}
 
 
@@ -117,7 +119,6 @@ def _u_grid(n_y, n_x):
 
 def gold(wavelengths):
     """eta, k of gold (Mitsuba's data) at ``wavelengths``."""
-    from ..spectrum import read_spd
     d = os.path.join(os.path.dirname(mi.__file__), "data", "ior")
     out = []
     for c in ("eta", "k"):
@@ -179,7 +180,6 @@ def write_ggx(path, alpha_u=0.2, alpha_v=None, wavelengths=np.arange(360.0, 831.
     wo = 2 * cos_im * m - wi
     S = model.fresnel(cos_im) * (model.G1(wo) * (cos_im > 0))[:, None]
     S = S.reshape(len(phi_i), len(theta_i), sample_res, sample_res, -1).transpose(0, 1, 4, 2, 3)
-    from ..spectrum import cie_tables_np
     ybar = np.interp(wavelengths, np.arange(360.0, 831.0, 5.0), cie_tables_np()[0][:, 1])
     lum = np.tensordot(S, ybar / ybar.sum(), axes=([2], [0]))
 

@@ -32,7 +32,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..sampling import cosine_hemisphere_pdf, square_to_cosine_hemisphere
-from .base import BSDFSample, DIFFUSE, GLOSSY, REFLECTION
+from .base import BSDF_TYPES, BSDFSample, DIFFUSE, GLOSSY, REFLECTION
 from .fresnel import fresnel_dielectric, lookup_ior, reflect_about
 from .microfacet import BECKMANN, GGX, Microfacet
 from .plastic import Plastic
@@ -222,6 +222,7 @@ def lerp_table(table, offset, x, active):
 
 # --------------------------------------------------------------------------- family
 
+@BSDF_TYPES.register("roughplastic")
 class RoughPlastic(Plastic):
     name = "roughplastic"
     flags = REFLECTION | DIFFUSE | GLOSSY

@@ -23,14 +23,16 @@ import mitsuba as mi
 
 from ..sampling import cosine_hemisphere_pdf, square_to_cosine_hemisphere
 from ..spectrum import d65
-from .base import SamplingIntegrator, PRIMAL
+from .base import INTEGRATORS, SamplingIntegrator, PRIMAL
 
 
+@INTEGRATORS.register("ambientocclusion")
 class AOIntegrator(SamplingIntegrator):
     name = "ambientocclusion"
     light_sampler = "uniform"   # lights play no part
 
     def __init__(self, props):
+        super().__init__(props)
         self.cos_sample = props.bool("cossample", True)
         self.max_distance = props.float("maxdistance", min=0.0) if props.has("maxdistance") else math.inf
         props.finish()

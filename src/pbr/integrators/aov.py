@@ -34,9 +34,8 @@ import drjit as dr
 import mitsuba as mi
 
 from ..bsdfs.base import ShadingContext
-from ..scene.props import Props
 from .. import spectrum as spec
-from .base import SamplingIntegrator, PRIMAL
+from .base import INTEGRATORS, SamplingIntegrator, PRIMAL
 
 # AOV type -> channel suffixes (Mitsuba's aov.cpp).
 AOV_TYPES = {
@@ -45,11 +44,12 @@ AOV_TYPES = {
 }
 
 
+@INTEGRATORS.register("aov")
 class AOVIntegrator(SamplingIntegrator):
     name = "aov"
 
     def __init__(self, props):
-        from . import INTEGRATORS
+        super().__init__(props)
         self.aovs = []
         for token in props.string("aovs", "").split(","):
             token = token.strip()
@@ -70,8 +70,7 @@ class AOVIntegrator(SamplingIntegrator):
                 raise props.error(key, f"expected a nested integrator, got {t!r}")
             if t == self.name:
                 raise props.error(key, "an 'aov' integrator cannot be nested in another")
-            props.mark(key)
-            self.nested.append((key, INTEGRATORS[t](Props(child, props.key(key), props.loader))))
+            self.nested.append((key, INTEGRATORS[t](props.child(key))))
         props.finish()
         if not self.aovs and not self.nested:
             raise props.error("aovs", "no AOV and no nested integrator given")
@@ -80,6 +79,11 @@ class AOVIntegrator(SamplingIntegrator):
         self.light_sampler = self.nested[0][1].light_sampler if self.nested else "uniform"
         self.channels = [f"{key}.{c}" for key, _ in self.nested for c in "RGB"]
         self.channels += [f"{name}.{c}" for name, kind in self.aovs for c in AOV_TYPES[kind]]
+
+    def check(self, scene) -> None:
+        super().check(scene)
+        for _, integrator in self.nested:
+            integrator.check(scene)
 
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
         """(H, W, len(channels)) tensor: nested RGB, then AOVs (module docstring)."""

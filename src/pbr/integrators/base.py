@@ -21,15 +21,46 @@ import numpy as np
 from .. import spectrum as spec
 from ..samplers import IndependentSampler, seed_array
 from ..sampling import power_heuristic
+from ..lights import LIGHT_TYPES
+from ..plugins.props import SceneError
+from ..plugins.registry import Registry
 from ..spectrum import SampledWavelengths
 
 PRIMAL, FORWARD, BACKWARD = "primal", "forward", "backward"
+# Type name -> integrator class (each integrator registers itself in its module).
+INTEGRATORS = Registry("integrator")
 MAX_SAMPLES_PER_PASS = int(os.environ.get("PBR_MAX_SAMPLES_PER_PASS", 1 << 22))
 
 
 class SamplingIntegrator:
+    """Base of every integrator: camera samples in passes, the film, and the adjoint
+    passes of differentiable integrators (``differentiable = True``)."""
+
     name = ""
+    path = "scene.integrator"     # the integrator's key path (for error messages)
     light_sampler = "power"
+    differentiable = False        # whether render_forward/render_backward are implemented
+    surfaces_only = False         # whether participating media are an error
+    traces_light_paths = False    # whether every emitter must emit rays (sample_Le), without media
+
+    def __init__(self, props):
+        self.path = props.path
+
+    def check(self, scene) -> None:
+        """Raise a SceneError naming this integrator's key path where ``scene`` holds
+        something it cannot render (called when a scene is loaded with it)."""
+        if self.surfaces_only and len(scene.media):
+            raise SceneError(f"{self.path}: the {self.name!r} integrator does not support participating media "
+                             f"(use 'volpath')")
+        if self.traces_light_paths:
+            lights = scene.lights
+            for path, (t, _) in zip(lights.paths, lights.entries):
+                if not lights.families[t].emits_rays:
+                    emitting = sorted(n for n, f in LIGHT_TYPES.items() if f.emits_rays)
+                    raise SceneError(f"{path}: the {self.name} integrator ({self.path}) cannot trace light paths "
+                                     f"from a {t!r} emitter (supported: {', '.join(emitting)})")
+            if len(scene.media):
+                raise SceneError(f"{self.path}: the {self.name} integrator does not support participating media")
 
     # -- subclasses -----------------------------------------------------------------
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
@@ -219,14 +250,6 @@ def mis_depth_limit(max_depth: int):
     """Mitsuba's max_depth: -1 = unlimited; otherwise paths have at most max_depth - 1
     bounces after the camera ray (max_depth = 1 shows only directly visible emitters)."""
     return math.inf if max_depth < 0 else max_depth
-
-
-def require_no_media(props) -> None:
-    """Surface-only integrators: a SceneError naming the integrator's key path when the
-    scene has participating media (they would be ignored silently otherwise)."""
-    if props.loader is not None and len(props.loader.media):
-        raise props.error(None, f"the {props.type!r} integrator does not support participating media "
-                                f"(use 'volpath')")
 
 
 def pbrt_max_depth(props, default: int = 5) -> int:

@@ -55,8 +55,8 @@ from ..bsdfs.base import ShadingContext
 from ..lights.directional import DirectionalLight
 from ..lights.directionalarea import DirectionalAreaLight
 from ..spectrum import first_only
-from .base import PRIMAL
-from .lightpath import (LightTracingIntegrator, check_light_paths, connect_to_camera, eval_importance,
+from .base import INTEGRATORS, PRIMAL
+from .lightpath import (LightTracingIntegrator, connect_to_camera, eval_importance,
                         sample_importance, shading_correction, start_light_path)
 
 # Per-vertex flags of stored light vertices.
@@ -153,11 +153,14 @@ def infinite_density(lights, wi, active):
     return pdf
 
 
+@INTEGRATORS.register("bdpt")
 class BDPTIntegrator(LightTracingIntegrator):
     name = "bdpt"
+    traces_light_paths = True
     light_sampler = "power"
 
     def __init__(self, props):
+        super().__init__(props)
         if props.has("maxdepth") and props.has("max_depth"):
             raise props.error("max_depth", "give either 'maxdepth' (pbrt-v4) or 'max_depth' (Mitsuba), not both")
         if props.has("max_depth"):
@@ -173,7 +176,6 @@ class BDPTIntegrator(LightTracingIntegrator):
             raise props.error("regularize", "BSDF regularisation is not supported (only false)")
         self.visualize_strategies = props.bool("visualizestrategies", False)
         self.visualize_weights = props.bool("visualizeweights", False)
-        check_light_paths(props, "bdpt")
         props.finish()
         self._only = None          # (s, t): keep only that strategy (render_strategies)
         self._unweighted = False   # without its MIS weight (visualizestrategies)

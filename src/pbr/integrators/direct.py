@@ -25,7 +25,7 @@ from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
 from ..spectrum import first_only
-from .base import SamplingIntegrator, PRIMAL, require_no_media
+from .base import INTEGRATORS, SamplingIntegrator, PRIMAL
 
 
 @dr.syntax
@@ -53,10 +53,13 @@ def hit_emission(scene, si, shape, wl, active):
     return lights.L(light - 1, si, wl, hit & (light > 0)), dr.select(hit, light, 0)
 
 
+@INTEGRATORS.register("direct")
 class DirectIntegrator(SamplingIntegrator):
     name = "direct"
+    surfaces_only = True
 
     def __init__(self, props):
+        super().__init__(props)
         if props.has("shading_samples") and (props.has("emitter_samples") or props.has("bsdf_samples")):
             raise props.error("shading_samples", "cannot be combined with 'emitter_samples' or 'bsdf_samples'")
         n = props.int("shading_samples", 1, min=0)
@@ -67,7 +70,6 @@ class DirectIntegrator(SamplingIntegrator):
                               "at least one emitter or BSDF sample is needed")
         self.hide_emitters = props.bool("hide_emitters", False)
         self.light_sampler = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
-        require_no_media(props)
         props.finish()
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):

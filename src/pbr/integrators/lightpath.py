@@ -13,7 +13,6 @@
 * :func:`start_light_path`, :func:`connect_to_camera`: the first and the last step of a
   light path, with the sampling routines of the lights (``LightSet.sample_Le``) and of the
   camera (``PerspectiveCamera.sample_Wi``).
-* :func:`check_light_paths`: the load-time check of the scene's emitters.
 
 Conventions: directions are world-space unit vectors unless named ``*_local``; along a
 light path ``si.wi`` points back toward the light (where the particle came from) and
@@ -30,7 +29,6 @@ import numpy as np
 
 from .. import spectrum as spec
 from ..bsdfs.base import TRANSMISSION, ShadingContext
-from ..scene.props import SceneError
 from .base import SamplingIntegrator
 
 # Mitsuba's ray offset (math::RayEpsilon): rays leaving a surface start this far (relative
@@ -201,37 +199,3 @@ def connect_to_camera(scene, camera, si, bsdf_id, wl, beta, active):
     ok &= side_ok & (cs.pdf > 0)
     contrib = beta * f * (corr * cs.We / dr.select(ok, cs.pdf, 1.0))
     return dr.select(ok, contrib, 0.0), cs.pos, ok
-
-
-def check_light_paths(props, what: str) -> None:
-    """Load-time check for integrators that trace light paths: every emitter must be able
-    to emit rays (``sample_Le``), and the scene must have no participating media."""
-    loader = props.loader
-    if loader is None:
-        return
-    from ..lights import LIGHT_TYPES
-    paths = list(_emitter_paths(loader.d))
-    for g, (t, _) in enumerate(loader.lights.entries):
-        if not getattr(LIGHT_TYPES[t], "emits_rays", False):
-            where = paths[g] if g < len(paths) else "scene"
-            raise SceneError(f"{where}: the {what} integrator ({props.path}) cannot trace light paths from a "
-                             f"{t!r} emitter (supported: area, point, spot, projector, projection, goniometric, "
-                             "directional, distant, directionalarea, constant, envmap)")
-    if len(loader.media):
-        raise SceneError(f"{props.path}: the {what} integrator does not support participating media")
-
-
-def _emitter_paths(d):
-    """Key paths of the scene's emitters, in the order the loader adds them."""
-    from ..geometry import SHAPE_PARAMS
-    from ..scene.loader import EMITTER_LIKE
-    for key, v in d.items():
-        if key == "type" or not isinstance(v, dict):
-            continue
-        t = v.get("type")
-        if t in EMITTER_LIKE:
-            yield f"scene.{key}"
-        elif t in SHAPE_PARAMS:
-            for k, c in v.items():
-                if isinstance(c, dict) and c.get("type") in EMITTER_LIKE:
-                    yield f"scene.{key}.{k}"

@@ -21,14 +21,16 @@ from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
 from ..spectrum import first_only
-from .base import SamplingIntegrator, PRIMAL, BACKWARD, emitted_mis, forward_derivative
+from .base import INTEGRATORS, SamplingIntegrator, PRIMAL, BACKWARD, emitted_mis, forward_derivative
 
 
+@INTEGRATORS.register("path")
 class PathIntegrator(SamplingIntegrator):
     name = "path"
     default_max_depth = -1
 
     def __init__(self, props):
+        super().__init__(props)
         self.max_depth = props.int("max_depth", self.default_max_depth, min=-1)
         self.rr_depth = props.int("rr_depth", 5, min=0)
         self.hide_emitters = props.bool("hide_emitters", False)
@@ -162,6 +164,7 @@ class PathIntegrator(SamplingIntegrator):
         return (L if primal else dL_fwd), valid
 
 
+@INTEGRATORS.register("prb")
 class PRBIntegrator(PathIntegrator):
     """``prb`` (Mitsuba's name): the same estimator, whose adjoint passes are Path Replay
     Backpropagation; Mitsuba's default ``max_depth`` of 6."""

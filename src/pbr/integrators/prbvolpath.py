@@ -34,9 +34,9 @@ from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..media import majorant
 from ..sampling import power_heuristic
-from ..scene.props import SceneError
+from ..plugins.props import SceneError
 from ..spectrum import first_only
-from .base import PRIMAL, BACKWARD, emitted_mis, forward_derivative
+from .base import INTEGRATORS, PRIMAL, BACKWARD, emitted_mis, forward_derivative
 from .volpath import SHADOW_EPSILON, VolPathIntegrator, _MediumAware
 
 
@@ -46,22 +46,26 @@ def _ratio(w):
     return dr.select(wd != 0, w * dr.rcp(wd), 0.0)
 
 
+@INTEGRATORS.register("prbvolpath")
 class PRBVolPathIntegrator(_MediumAware):
     name = "prbvolpath"
 
     def __init__(self, props):
+        super().__init__(props)
         self.max_depth = props.int("max_depth", 6, min=-1)
         self.rr_depth = props.int("rr_depth", 5, min=0)
         self.hide_emitters = props.bool("hide_emitters", False)
         self.light_sampler = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
         self.majorant_factor = props.float("majorant_factor", 1.1, min=1.0)
         self.max_null = props.int("max_null_collisions", 1 << 16, min=1)
-        self._path = props.path
         props.finish()
 
-    def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
+    def check(self, scene) -> None:
+        super().check(scene)
         if getattr(scene.media, "has_le", False):
-            raise SceneError(f"{self._path}: prbvolpath does not support emissive media (Le); use volpath")
+            raise SceneError(f"{self.path}: prbvolpath does not support emissive media (Le); use volpath")
+
+    def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
         if self.max_depth == 0:
             return mi.Spectrum(0.0), mi.Bool(False)
         return self._sample(scene, rng, ray, wl, mode, dL, L_in, active)

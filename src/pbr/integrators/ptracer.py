@@ -30,15 +30,19 @@ import numpy as np
 from ..bsdfs.base import ShadingContext
 from ..samplers import IndependentSampler, seed_array
 from ..spectrum import SampledWavelengths, first_only
-from .base import SamplingIntegrator, _progress
-from .lightpath import (SplatFilm, check_light_paths, connect_to_camera, sample_importance, shading_correction,
+from ..plugins.props import SceneError
+from .base import INTEGRATORS, SamplingIntegrator, _progress
+from .lightpath import (SplatFilm, connect_to_camera, sample_importance, shading_correction,
                         start_light_path)
 
 
+@INTEGRATORS.register("ptracer", "lightpath")
 class ParticleTracerIntegrator(SamplingIntegrator):
     name = "ptracer"
+    traces_light_paths = True
 
     def __init__(self, props):
+        super().__init__(props)
         self.max_depth = props.int("max_depth", -1, min=-1)
         self.rr_depth = props.int("rr_depth", 5, min=0)
         self.hide_emitters = props.bool("hide_emitters", False)
@@ -46,13 +50,11 @@ class ParticleTracerIntegrator(SamplingIntegrator):
         if self.samples_per_pass == 0:
             raise props.error("samples_per_pass", "must be positive (or -1: automatic)")
         props.finish()
-        check_light_paths(props, self.name)
 
     def _plan(self, scene, sensor, spp):
         cam, w, h, spp, per_pass, n_pass = super()._plan(scene, sensor, spp)
         if self.samples_per_pass > 0:
             if spp % self.samples_per_pass:
-                from ..scene.props import SceneError
                 raise SceneError(f"ptracer: sample_count ({spp}) must be a multiple of samples_per_pass "
                                  f"({self.samples_per_pass})")
             per_pass = min(spp, self.samples_per_pass)

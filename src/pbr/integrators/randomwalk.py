@@ -20,18 +20,20 @@ import drjit as dr
 import mitsuba as mi
 
 from ..bsdfs.base import ShadingContext
-from .base import SamplingIntegrator, PRIMAL, pbrt_max_depth, require_no_media
+from .base import INTEGRATORS, SamplingIntegrator, PRIMAL, pbrt_max_depth
 from .direct import hit_emission
 
 
+@INTEGRATORS.register("randomwalk")
 class RandomWalkIntegrator(SamplingIntegrator):
     name = "randomwalk"
+    surfaces_only = True
     light_sampler = "uniform"   # no light sampling
 
     def __init__(self, props):
+        super().__init__(props)
         self.max_depth = pbrt_max_depth(props)
         self.hide_emitters = props.bool("hide_emitters", False)
-        require_no_media(props)
         props.finish()
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):

@@ -24,23 +24,25 @@ import mitsuba as mi
 
 from ..bsdfs.base import REFLECTION, TRANSMISSION, ShadingContext
 from ..spectrum import first_only
-from .base import SamplingIntegrator, PRIMAL, pbrt_max_depth, require_no_media
+from .base import INTEGRATORS, SamplingIntegrator, PRIMAL, pbrt_max_depth
 from .direct import hit_emission
 
 # How a direction is drawn without BSDF sampling (per BSDF entry).
 HEMI_SAME, HEMI_OTHER, SPHERE = 0, 1, 2
 
 
+@INTEGRATORS.register("simplepath")
 class SimplePathIntegrator(SamplingIntegrator):
     name = "simplepath"
+    surfaces_only = True
     light_sampler = "uniform"   # pbrt-v4's SimplePath picks lights uniformly
 
     def __init__(self, props):
+        super().__init__(props)
         self.max_depth = pbrt_max_depth(props)
         self.sample_lights = props.bool("samplelights", True)
         self.sample_bsdf = props.bool("samplebsdf", True)
         self.hide_emitters = props.bool("hide_emitters", False)
-        require_no_media(props)
         props.finish()
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):

@@ -50,10 +50,10 @@ from ..bsdfs import DIFFUSE, NO_BACK, ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..samplers import IndependentSampler
 from ..sampling import power_heuristic
-from ..scene.props import SceneError
+from ..plugins.props import SceneError
 from ..spectrum import SampledWavelengths, first_only
-from .base import SamplingIntegrator, _progress, emitted_mis
-from .lightpath import check_light_paths, sample_importance, shading_correction, start_light_path
+from .base import INTEGRATORS, SamplingIntegrator, _progress, emitted_mis
+from .lightpath import sample_importance, shading_correction, start_light_path
 
 UNLIMITED = 0xFFFFFFF0
 
@@ -118,11 +118,14 @@ def radical_inverse_2(i: int) -> float:
     return int(f"{i:032b}"[::-1], 2) / 2.0 ** 32
 
 
+@INTEGRATORS.register("sppm")
 class SPPMIntegrator(SamplingIntegrator):
     name = "sppm"
+    traces_light_paths = True
     GAMMA = 2.0 / 3.0      # fraction of new photons kept per iteration (Hachisuka & Jensen)
 
     def __init__(self, props):
+        super().__init__(props)
         if props.has("max_depth") and props.has("maxdepth"):
             raise props.error("maxdepth", "give either 'maxdepth' (pbrt-v4) or 'max_depth' (Mitsuba), not both")
         if props.has("maxdepth"):
@@ -138,7 +141,6 @@ class SPPMIntegrator(SamplingIntegrator):
         self.hide_emitters = props.bool("hide_emitters", False)
         self.light_sampler = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
         props.finish()
-        check_light_paths(props, self.name)
         self.history: list[dict] = []
         self.checkpoints: dict[int, mi.TensorXf] = {}
 

@@ -32,7 +32,7 @@ from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..media import majorant
 from ..spectrum import first_only
-from .base import SamplingIntegrator, PRIMAL
+from .base import INTEGRATORS, SamplingIntegrator, PRIMAL
 
 SHADOW_EPSILON = 1e-4
 
@@ -54,10 +54,12 @@ class _MediumAware(SamplingIntegrator):
         return super()._plan(scene, sensor, spp)
 
 
+@INTEGRATORS.register("volpath", "volpathmis")
 class VolPathIntegrator(_MediumAware):
     name = "volpath"
 
     def __init__(self, props):
+        super().__init__(props)
         self.max_depth = props.int("max_depth", -1, min=-1)
         self.rr_depth = props.int("rr_depth", 5, min=0)
         self.hide_emitters = props.bool("hide_emitters", False)
@@ -364,6 +366,7 @@ class VolPathIntegrator(_MediumAware):
         return L, valid
 
 
+@INTEGRATORS.register("simplevolpath")
 class SimpleVolPathIntegrator(_MediumAware):
     """``simplevolpath`` (pbrt-v4's SimpleVolPathIntegrator): a reference estimator with
     no light sampling and no spectral MIS. Only the first wavelength is traced (the
@@ -373,6 +376,7 @@ class SimpleVolPathIntegrator(_MediumAware):
     name = "simplevolpath"
 
     def __init__(self, props):
+        super().__init__(props)
         self.max_depth = props.int("max_depth", 5, min=-1)
         props.finish()
         self.light_sampler = "uniform"

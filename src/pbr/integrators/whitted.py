@@ -38,23 +38,25 @@ import mitsuba as mi
 from ..bsdfs.base import ShadingContext
 from ..samplers import IndependentSampler
 from ..spectrum import N_WAVELENGTHS, SampledWavelengths, first_only
-from .base import SamplingIntegrator, PRIMAL, require_no_media
+from .base import INTEGRATORS, SamplingIntegrator, PRIMAL
 from .direct import hit_emission, intersect_camera_ray
 
 
+@INTEGRATORS.register("whitted")
 class WhittedIntegrator(SamplingIntegrator):
     name = "whitted"
+    surfaces_only = True
     light_sampler = "uniform"   # unused: every light is sampled
     # Lobe-selection numbers of the branches: the first lobe and the last one.
     branch_u = (0.0, 1.0 - 2.0 ** -24)
 
     def __init__(self, props):
+        super().__init__(props)
         self.max_depth = props.int("max_depth", 5)
         if self.max_depth < 0:
             raise props.error("max_depth", f"must be >= 0 (whitted branches at every specular hit, so the "
                                            f"depth must be finite), got {self.max_depth}")
         self.hide_emitters = props.bool("hide_emitters", False)
-        require_no_media(props)
         props.finish()
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):

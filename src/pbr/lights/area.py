@@ -27,7 +27,7 @@ import numpy as np
 
 from ..textures import load_spectrum
 from ..sampling import square_to_cosine_hemisphere, cosine_hemisphere_pdf
-from .base import LightType, LightSample, LeSample
+from .base import LIGHT_TYPES, LightType, LightSample, LeSample
 
 # Mesh shapes that stay one light (Mitsuba builds a rectangle as two triangles).
 SINGLE_LIGHT_MESHES = ("Rectangle",)
@@ -78,6 +78,7 @@ def _shape_normal_cone(shape):
     return np.array([0.0, 0.0, 1.0]), -1.0
 
 
+@LIGHT_TYPES.register("area")
 class AreaLight(LightType):
     name = "area"
 

@@ -15,6 +15,10 @@ from __future__ import annotations
 import mitsuba as mi
 
 from ..backend import Struct
+from ..plugins.registry import Registry
+
+# Type name -> light family (each family registers itself in its module).
+LIGHT_TYPES = Registry("emitter")
 
 
 class LightSample(Struct):

@@ -24,7 +24,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .base import LightType, LightSample, LeSample
+from .base import LIGHT_TYPES, LightType, LightSample, LeSample
 from .point import load_constant_emission, photometric, luminance, vec_table, gather3
 
 
@@ -38,6 +38,7 @@ def scene_sphere(scene):
     return c, max(r, 1e-4)
 
 
+@LIGHT_TYPES.register("directional")
 class DirectionalLight(LightType):
     name = "directional"
     delta = True
@@ -122,6 +123,7 @@ class DirectionalLight(LightType):
         return mi.Float(1.0 / (math.pi * self.radius ** 2)), mi.Float(1.0)
 
 
+@LIGHT_TYPES.register("distant")
 class DistantLight(DirectionalLight):
     """pbrt-v4's ``distant``: also takes ``L`` and ``from``/``to``."""
     name = "distant"

@@ -23,9 +23,10 @@ import mitsuba as mi
 import numpy as np
 
 from ..textures import load_spectrum
-from .base import LightType, LightSample, LeSample
+from .base import LIGHT_TYPES, LightType, LightSample, LeSample
 
 
+@LIGHT_TYPES.register("directionalarea")
 class DirectionalAreaLight(LightType):
     name = "directionalarea"
     delta = True

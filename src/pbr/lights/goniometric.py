@@ -27,7 +27,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..image import read_image
-from .base import LightSample
+from .base import LIGHT_TYPES, LightSample
 from .point import (DeltaPositionLight, load_constant_emission, power_factor, light_frame, mat_rows, apply_rows,
                     point_bounds, max_value, luminance)
 
@@ -116,6 +116,7 @@ def _solid_angle_mean(img: np.ndarray, mapping: int) -> float:
     return float((img.mean(axis=1) * w).sum() / 2.0)
 
 
+@LIGHT_TYPES.register("goniometric")
 class GoniometricLight(DeltaPositionLight):
     name = "goniometric"
 

@@ -68,10 +68,11 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ..scene.params import ParamOwner, param_table
 from .. import spectrum as spec
+from ..image import read_image
+from ..plugins.params import ParamOwner, param_table
 from ..textures import load_spectrum, BITMAP, CHECKERBOARD, COMPOSITE, OP_SCALE, OP_CHECKER
-from .base import LightType, LightSample, LeSample
+from .base import LIGHT_TYPES, LightType, LightSample, LeSample
 from .point import _Ref
 
 INV_4PI = 1.0 / (4.0 * math.pi)
@@ -139,7 +140,6 @@ def _env_image(loader, props) -> np.ndarray:
                                 f"(got {', '.join(given) if given else 'none'})")
     key = given[0]
     if key == "filename":
-        from ..image import read_image
         fname = loader.resolve_path(props.string("filename"), props.key("filename"))
         try:
             img = read_image(fname)
@@ -221,6 +221,7 @@ def _infinite_pdf_Le(self, idx, p, n, d, active):
 
 # --------------------------------------------------------------------------- constant
 
+@LIGHT_TYPES.register("constant")
 class ConstantLight(LightType):
     name = "constant"
     infinite = True
@@ -265,6 +266,7 @@ class ConstantLight(LightType):
 
 # --------------------------------------------------------------------------- envmap
 
+@LIGHT_TYPES.register("envmap")
 class EnvMapLight(LightType):
     name = "envmap"
     infinite = True
@@ -479,6 +481,7 @@ class EnvMapLight(LightType):
 
 # --------------------------------------------------------------------------- portal
 
+@LIGHT_TYPES.register("portalenvmap")
 class PortalEnvMapLight(EnvMapLight):
     name = "portalenvmap"
     needs_ref = True   # Le and pdf_Le_dir depend on the ray origin

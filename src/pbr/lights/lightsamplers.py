@@ -15,6 +15,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from ..plugins.props import SceneError
 from .bvh import BVHLightSampler, BoundsTable, ensure_table
 
 LIGHT_SAMPLERS = ("uniform", "power", "bvh")
@@ -93,7 +94,6 @@ class LightTable:
     light ``k``'s index within its family; ``powers`` and ``bounds`` are per light."""
 
     def __init__(self, entries, families, scene):
-        from ..scene.props import SceneError
         counts, local, powers, items = [], [], [], []
         for t, i in entries:
             fam = families[t]

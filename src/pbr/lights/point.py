@@ -27,7 +27,7 @@ import numpy as np
 from .. import spectrum as spec
 from ..textures import (load_spectrum, ConstantSpectrum, Checkerboard, Bitmap, Composite,
                         BASE_ONE, BASE_SIGMOID, BASE_TABLE, OP_CHECKER)
-from .base import LightType, LightSample, LeSample
+from .base import LIGHT_TYPES, LightType, LightSample, LeSample
 
 
 # ------------------------------------------------------------------ shared helpers
@@ -213,6 +213,7 @@ class _Ref:
 
 # ------------------------------------------------------------------------ point
 
+@LIGHT_TYPES.register("point")
 class PointLight(DeltaPositionLight):
     name = "point"
 

@@ -36,9 +36,9 @@ import numpy as np
 
 from .. import spectrum as spec
 from ..cameras import _x_fov
-from ..scene.props import Props
+from ..plugins.props import Props
 from ..textures import load_spectrum, Bitmap
-from .base import LightSample
+from .base import LIGHT_TYPES, LightSample
 from .point import (DeltaPositionLight, light_frame, mat_rows, apply_rows, vec_table, gather3, point_bounds,
                     luminance, max_value)
 
@@ -61,6 +61,7 @@ def _is_texture_plugin(loader, v) -> bool:
     return isinstance(v, dict) and v.get("type") in ("bitmap", "checkerboard")
 
 
+@LIGHT_TYPES.register("projector")
 class ProjectorLight(DeltaPositionLight):
     name = "projector"
     pbrt = False   # pbrt-v4's radiometry and parameters (``projection``)
@@ -165,6 +166,7 @@ class ProjectorLight(DeltaPositionLight):
         return LightSample(dr.select(ok, L, 0.0), wi, dr.select(ok, 1.0, 0.0), p, mi.Bool(True))
 
 
+@LIGHT_TYPES.register("projection")
 class ProjectionLight(ProjectorLight):
     """pbrt-v4's ``projection``."""
     name = "projection"

@@ -20,7 +20,7 @@ import mitsuba as mi
 import numpy as np
 
 from ..textures import load_spectrum
-from .base import LightSample, LeSample
+from .base import LIGHT_TYPES, LightSample, LeSample
 from .point import (DeltaPositionLight, load_constant_emission, power_factor, light_frame, spatially_varying,
                     mat_rows, apply_rows, point_bounds, max_value, luminance, gather3)
 
@@ -32,6 +32,7 @@ def spot_solid_angle(cutoff_rad: float, beam_rad: float) -> float:
     return 2.0 * math.pi * (1.0 - (math.sin(cutoff_rad) - math.sin(beam_rad)) / (cutoff_rad - beam_rad))
 
 
+@LIGHT_TYPES.register("spot")
 class SpotLight(DeltaPositionLight):
     name = "spot"
 

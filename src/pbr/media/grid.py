@@ -21,7 +21,8 @@ import mitsuba as mi
 import numpy as np
 
 from .. import spectrum as spec
-from ..scene.props import SceneError
+from ..plugins.params import ParamOwner
+from ..plugins.props import SceneError
 
 MAJORANT_RES = 16
 """Cells per axis of the majorant grid (pbrt-v4 uses 16^3)."""
@@ -89,7 +90,6 @@ class GridTable:
         parameter ``<path>.data`` (Mitsuba's gridvolume key). Returns the grid index."""
         self.grids.append((grid, form))
         if path is not None and grid.shape[3] == 1:
-            from ..scene.params import ParamOwner
             self.owners.append((len(self.grids) - 1, ParamOwner(path, data=mi.TensorXf(grid))))
         return len(self.grids) - 1
 

@@ -1,5 +1,5 @@
 """Scene loading (Mitsuba dicts and XML), assembly and parameter traversal."""
 
-from .props import SceneError  # noqa: F401
+from ..plugins.props import SceneError  # noqa: F401
 from .loader import load_dict, load_file  # noqa: F401
 from .params import traverse, SceneParameters  # noqa: F401

@@ -4,6 +4,12 @@ Same dict conventions as ``mitsuba.load_dict``: plugin ``type`` names and parame
 names, ids (the dict key, or an explicit ``id``), references ``{'type': 'ref', 'id': ..}``
 and nested objects. Unknown types and parameters raise :class:`SceneError` naming the
 key path (``scene.small-box.bsdf.reflectance``).
+
+The loader is the top of the loading layers: it looks type names up in the families'
+registries, hands each plugin its :class:`~pbr.plugins.props.Props` and itself (the
+*load context*: ``textures``, ``resolve_ref``, ``resolve_path``, ``bsdf``, ``medium``),
+and records on the scene what later stages need: per shape its key path, BSDF, emitter
+and media; per emitter its key path (``LightSet.paths``). See docs/architecture.md.
 """
 
 from __future__ import annotations
@@ -11,23 +17,25 @@ from __future__ import annotations
 import os
 
 from .. import backend
-from .props import Props, SceneError
+from ..bsdfs import BSDFSet, bsdf_names
+from ..cameras import SENSORS
+from ..geometry import SHAPE_PARAMS, shape_to_mitsuba
+from ..integrators import INTEGRATORS
+from ..lights import LIGHT_TYPES, LightSet
+from ..media import MEDIUM_TYPES, MediumSet
+from ..plugins.props import Props, SceneError
+from ..textures import TEXTURE_TYPES, TextureSet, load_spectrum
+from .scene import Scene, ShapeList
+from .xml import parse_file
 
-BSDF_LIKE = {"diffuse", "conductor", "roughconductor", "dielectric", "thindielectric", "roughdielectric",
-             "plastic", "roughplastic", "twosided", "mask", "blendbsdf", "null", "bumpmap", "normalmap",
-             "principled", "principledthin", "coateddiffuse", "coatedconductor", "diffusetransmission",
-             "measured", "hair", "mix"}
-EMITTER_LIKE = {"area", "point", "spot", "projector", "directional", "constant", "envmap", "directionalarea",
-                "projection", "goniometric", "distant", "portalenvmap"}
-TEXTURE_LIKE = {"rgb", "spectrum", "blackbody", "d65", "uniform", "checkerboard", "bitmap", "scale", "mesh_attribute"}
+# Emitter types a shape can carry.
+SURFACE_EMITTERS = ("area", "directionalarea")
 
 
 class Loader:
+    """Parses one scene dict (see the module docstring)."""
+
     def __init__(self, d: dict, base_dir: str | None = None):
-        from ..textures import TextureSet
-        from ..bsdfs import BSDFSet
-        from ..lights import LightSet
-        from ..media import MediumSet
         if not isinstance(d, dict) or d.get("type") != "scene":
             raise SceneError("scene: expected a dict with 'type': 'scene'")
         self.d = d
@@ -77,8 +85,18 @@ class Loader:
             return self.resolve_ref(oid, path), self.ids[oid][1]
         return v, path
 
+    def _target_type(self, v) -> str | None:
+        """The type of a child dict, or of the object a reference names."""
+        if not isinstance(v, dict):
+            return None
+        if v.get("type") == "ref":
+            target = self.ids.get(v.get("id"))
+            return target[0].get("type") if target is not None else None
+        return v.get("type")
+
     # -- plugins -------------------------------------------------------------------------
     def bsdf(self, v: dict, path: str) -> int:
+        """Entry of the BSDF described (or referenced) by ``v``; each dict is parsed once."""
         v, path = self._deref(v, path)
         if id(v) not in self._bsdf_cache:
             first = len(self.textures.items)
@@ -96,34 +114,62 @@ class Loader:
 
     def medium(self, v: dict, path: str) -> int:
         """Index of the medium described (or referenced) by ``v``."""
-        from ..media import MEDIUM_LIKE
         v, path = self._deref(v, path)
-        if v.get("type") not in MEDIUM_LIKE:
-            raise SceneError(f"{path}: expected a medium ({', '.join(sorted(MEDIUM_LIKE))}), "
-                             f"got type {v.get('type')!r}")
+        if v.get("type") not in MEDIUM_TYPES:
+            raise SceneError(f"{path}: expected a medium ({MEDIUM_TYPES.supported()}), got type {v.get('type')!r}")
         if id(v) not in self._medium_cache:
             self._medium_cache[id(v)] = self.media.add(self, Props(v, path, self))
         return self._medium_cache[id(v)]
 
     def is_medium(self, v) -> bool:
         """Whether a child dict is a medium or a reference to one."""
-        from ..media import MEDIUM_LIKE
-        if not isinstance(v, dict):
-            return False
-        if v.get("type") == "ref":
-            target = self.ids.get(v.get("id"))
-            return target is not None and target[0].get("type") in MEDIUM_LIKE
-        return v.get("type") in MEDIUM_LIKE
+        return self._target_type(v) in MEDIUM_TYPES
 
-    def load(self):
-        from .scene import Scene
-        from ..geometry import shape_to_mitsuba, SHAPE_PARAMS
-        from ..cameras import SENSORS
-        from ..integrators import INTEGRATORS
+    def _shape(self, key: str, v: dict, shapes: ShapeList, defaults: dict) -> None:
+        """Parse shape ``key`` with its BSDF, emitter and media into ``shapes``."""
+        path = f"scene.{key}"
+        p = Props(v, path, self)
+        p.mark("id")
+        geo = shape_to_mitsuba(p, self.resolve_path)
+        sidx = len(shapes)
+        children = p.children()
+        if p.has("bsdf"):
+            b = self.bsdf(p.raw("bsdf"), p.key("bsdf"))
+        else:
+            nested = [k for k, c in children if k not in ("interior", "exterior")
+                      and (c["type"] in bsdf_names() or c["type"] == "ref")]
+            for k in nested[1:]:
+                raise p.error(k, "a shape takes at most one BSDF")
+            if nested:
+                p.mark(nested[0])
+                b = self.bsdf(p.raw(nested[0]), p.key(nested[0]))
+            else:
+                # Mitsuba: a shape without a BSDF gets a diffuse one, black if it emits.
+                emits = any(c["type"] in LIGHT_TYPES for _, c in children)
+                which = "black" if emits else "diffuse"
+                if which not in defaults:
+                    d = {"type": "diffuse", "reflectance": 0.0} if emits else {"type": "diffuse"}
+                    defaults[which] = self.bsdfs.add(self, Props(d, f"{path}.bsdf", self))
+                b = defaults[which]
+        light = 0
+        for k, c in children:
+            if c["type"] not in LIGHT_TYPES:
+                continue
+            if c["type"] not in SURFACE_EMITTERS:
+                raise p.error(k, f"a shape can only carry an 'area' or 'directionalarea' emitter, got {c['type']!r}")
+            if light:
+                raise p.error(k, "a shape takes at most one emitter")
+            light = self.lights.add(self, p.child(k), sidx) + 1
+        media = [0, 0]
+        for j, k in enumerate(("interior", "exterior")):
+            if p.has(k):
+                media[j] = self.medium(p.raw(k), p.key(k)) + 1
+        p.finish()
+        shapes.add(geo, b, light, v.get("id", key), path, media)
 
-        sensors, integrator_props, shapes = [], None, []
-        shape_bsdf, shape_light, shape_ids, shape_media = [], [], [], []
-        default_bsdf = default_black = None
+    def load(self) -> Scene:
+        sensors, integrator_props = [], None
+        shapes, defaults = ShapeList(), {}
         root = Props(self.d, "scene", self)
         for key, v in self.d.items():
             if key == "type":
@@ -147,84 +193,39 @@ class Loader:
                     raise SceneError(f"{path}: a scene has at most one integrator")
                 integrator_props = Props(v, path, self)
             elif t in SHAPE_PARAMS:
-                p = Props(v, path, self)
-                p.mark("id")
-                geo = shape_to_mitsuba(p, self.resolve_path)
-                sidx = len(shapes)
-                if p.has("bsdf"):
-                    b = self.bsdf(p.raw("bsdf"), p.key("bsdf"))
-                else:
-                    nested = [k for k, c in p.children() if c["type"] in BSDF_LIKE or c["type"] == "ref"]
-                    if nested:
-                        for k in nested[1:]:
-                            raise p.error(k, "a shape takes at most one BSDF")
-                        p.mark(nested[0])
-                        b = self.bsdf(p.raw(nested[0]), p.key(nested[0]))
-                    elif any(c["type"] in EMITTER_LIKE for _, c in p.children()):
-                        # Mitsuba: an emitting shape without a BSDF gets a black diffuse one.
-                        if default_black is None:
-                            default_black = self.bsdfs.add(
-                                self, Props({"type": "diffuse", "reflectance": 0.0}, f"{path}.bsdf", self))
-                        b = default_black
-                    else:
-                        if default_bsdf is None:
-                            default_bsdf = self.bsdfs.add(self, Props({"type": "diffuse"}, f"{path}.bsdf", self))
-                        b = default_bsdf
-                light = 0
-                em_keys = [k for k, c in p.children() if c["type"] in EMITTER_LIKE]
-                for k in em_keys:
-                    c = p.raw(k)
-                    if c["type"] not in ("area", "directionalarea"):
-                        raise p.error(k, f"a shape can only carry an 'area' or 'directionalarea' emitter, "
-                                         f"got {c['type']!r}")
-                    if light:
-                        raise p.error(k, "a shape takes at most one emitter")
-                    light = self.lights.add(self, Props(c, p.key(k), self), sidx) + 1
-                media = [0, 0]
-                for j, k in enumerate(("interior", "exterior")):
-                    if p.has(k):
-                        media[j] = self.medium(p.raw(k), p.key(k)) + 1
-                p.finish()
-                shape_media.append(media)
-                shapes.append(geo)
-                shape_bsdf.append(b)
-                shape_light.append(light)
-                shape_ids.append(v.get("id", key))
-            elif t == "mix" and ("tex1" in v or "tex2" in v):
+                self._shape(key, v, shapes, defaults)
+            elif t in TEXTURE_TYPES and (t != "mix" or "tex1" in v or "tex2" in v):
                 # pbrt-v4 has both a mix texture (tex1, tex2) and a mix material.
-                from ..textures import load_spectrum
                 load_spectrum(self, v, path, emitter=False)
-            elif t in BSDF_LIKE:
+            elif t in bsdf_names():
                 self.bsdf(v, path)
-            elif t in TEXTURE_LIKE:
-                from ..textures import load_spectrum
-                load_spectrum(self, v, path, emitter=False)
-            elif t in EMITTER_LIKE:
+            elif t in LIGHT_TYPES:
                 self.lights.add(self, Props(v, path, self))
-            elif self.is_medium(v) and t != "ref":
+            elif t in MEDIUM_TYPES:
                 self.medium(v, path)
             else:
                 raise SceneError(f"{path}: unknown plugin type {t!r}")
-        if not shapes:
+        if not len(shapes):
             raise SceneError("scene: the scene has no shapes")
         if not sensors:
-            from ..cameras import PerspectiveCamera
-            sensors.append(PerspectiveCamera(Props({"type": "perspective", "fov": 45.0}, "scene.sensor", self)))
+            sensors.append(SENSORS["perspective"](Props({"type": "perspective", "fov": 45.0}, "scene.sensor", self)))
         if integrator_props is None:
             integrator_props = Props({"type": "path"}, "scene.integrator", self)
         integrator = INTEGRATORS[integrator_props.type](integrator_props)
-        return Scene(self, shapes, shape_bsdf, shape_light, shape_ids, sensors, integrator, shape_media)
+        scene = Scene(self.textures, self.bsdfs, self.lights, self.media, shapes, sensors, integrator,
+                      self.bsdf_textures)
+        integrator.check(scene)
+        return scene
 
 
-def load_dict(d: dict, base_dir: str | None = None):
+def load_dict(d: dict, base_dir: str | None = None) -> Scene:
     """Build a :class:`pbr.scene.Scene` from a Mitsuba-style scene dict."""
     backend.ensure()
     return Loader(d, base_dir).load()
 
 
-def load_file(path: str, **kwargs):
+def load_file(path: str, **kwargs) -> Scene:
     """Load a Mitsuba XML scene; keyword arguments override its ``<default>`` values."""
-    from .xml import parse_file
     if not os.path.exists(path):
         raise FileNotFoundError(f"{path}: scene file not found")
     ext = os.path.splitext(path)[1].lower()

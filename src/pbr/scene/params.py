@@ -4,39 +4,21 @@ Keys follow ``mi.traverse`` for the same plugins (``red.reflectance.value``,
 ``light.emitter.radiance.value``, ``<id>.reflectance.data`` for bitmaps). Values are
 Dr.Jit arrays: enable gradients on them or assign new values, then call ``update()``
 to rebuild the scene's tables (which keeps the AD graph to the parameters).
+
+``tables_as_leaves``: forward-mode differentiation inside a symbolic loop can only start
+from variables whose tangents are already known; it may not cross an edge built outside
+the loop (Dr.Jit: "outside of the current dr.isolate_grad() scope"). The tables built
+from parameters are such edges, so for a forward pass they are replaced by leaves that
+carry the tangent the parameters give them.
 """
 
 from __future__ import annotations
 
+import contextlib
+
 import drjit as dr
-import mitsuba as mi
 
-
-class ParamOwner:
-    """Parameters owned by one scene object outside the texture table (a BSDF's IOR, an
-    environment map's texels, a medium's voxel grid): ``params`` maps a name to a Dr.Jit
-    value; the key is ``<path>.<name>``."""
-
-    def __init__(self, path: str, **params):
-        self.path = path.split(".", 1)[1] if path.startswith("scene.") else path
-        self.params = params
-
-
-def param_table(values) -> "mi.Float":
-    """A ``mi.Float`` table of per-instance scalars (Python floats or width-1 Dr.Jit
-    arrays), built by scatters so that parameters with gradients stay attached. While
-    ``dr.freeze`` records, every entry is scattered as a literal (a table copied from a
-    Python list cannot be recorded). The table has at least two entries: Dr.Jit turns a
-    gather from a one-entry array into a broadcast of its value, which a recording keeps
-    as the value it had when recorded."""
-    values = list(values) + [0.0] * (2 - len(values))
-    recording = dr.flag(dr.JitFlag.FreezingScope)
-    table = (dr.zeros(mi.Float, len(values)) if recording
-             else mi.Float([v if isinstance(v, (int, float)) else 0.0 for v in values]))
-    for i, v in enumerate(values):
-        if recording or not isinstance(v, (int, float)):
-            dr.scatter(table, mi.Float(v), mi.UInt32(i))
-    return table
+from ..plugins.tables import map_tables
 
 
 class SceneParameters:
@@ -133,3 +115,39 @@ class SceneParameters:
 
 def traverse(scene) -> SceneParameters:
     return SceneParameters(scene)
+
+
+@contextlib.contextmanager
+def tables_as_leaves(scene, tangents: dict):
+    """Within the block, the scene's tables are built from fresh copies of the parameters
+    whose tangents are ``tangents`` (key -> tangent), then replaced by leaves holding the
+    tangent each table receives; afterwards the parameters and tables are restored."""
+    params = traverse(scene)
+    originals = {k: params[k] for k in tangents}
+    try:
+        with dr.resume_grad():
+            leaves = []
+            for k, t in tangents.items():
+                leaf = dr.detach(originals[k])
+                dr.enable_grad(leaf)
+                dr.set_grad(leaf, t)
+                params[k] = leaf
+                leaves.append(leaf)
+            params.update()
+            dr.enqueue(dr.ADMode.Forward, *leaves)
+            dr.traverse(dr.ADMode.Forward, flags=dr.ADFlag.ClearEdges)
+
+            def as_leaf(x):
+                if not dr.grad_enabled(x):
+                    return x
+                y = dr.detach(x)
+                dr.enable_grad(y)
+                dr.set_grad(y, dr.grad(x))
+                return y
+
+            map_tables(scene, as_leaf)
+        yield
+    finally:
+        for k, v in originals.items():
+            params[k] = v
+        params.update()

@@ -1,4 +1,5 @@
-"""The assembled scene: geometry (in Mitsuba), and pbr's texture, BSDF and light tables."""
+"""The assembled scene: geometry (in Mitsuba), and pbr's texture, BSDF, light and medium
+tables, with what the loader recorded about each shape."""
 
 from __future__ import annotations
 
@@ -6,31 +7,48 @@ import drjit as dr
 import mitsuba as mi
 
 from .. import meshattr
-from .tables import own_table_memory
 from ..geometry import Geometry
+from ..plugins.tables import own_table_memory
+
+
+class ShapeList:
+    """Per shape, in scene order: the Mitsuba shape (or its dict), the BSDF entry, the
+    emitter entry + 1 (0: none), the id, the key path, and the [interior, exterior]
+    medium indices + 1 (0: vacuum)."""
+
+    def __init__(self):
+        self.geometry, self.bsdf, self.light, self.ids, self.paths, self.media = [], [], [], [], [], []
+
+    def __len__(self):
+        return len(self.ids)
+
+    def add(self, geometry, bsdf: int, light: int, sid: str, path: str, media) -> None:
+        for column, v in zip((self.geometry, self.bsdf, self.light, self.ids, self.paths, self.media),
+                             (geometry, bsdf, light, sid, path, media)):
+            column.append(v)
 
 
 class Scene:
-    def __init__(self, loader, shapes, shape_bsdf, shape_light, shape_ids, sensors, integrator, shape_media=None):
-        self.textures = loader.textures
-        self.bsdfs = loader.bsdfs
-        self.lights = loader.lights
-        self.geometry = Geometry(shapes)
+    def __init__(self, textures, bsdfs, lights, media, shapes: ShapeList, sensors, integrator,
+                 bsdf_textures: dict):
+        self.textures = textures
+        self.bsdfs = bsdfs
+        self.lights = lights
+        self.media = media
+        self.geometry = Geometry(shapes.geometry)
         self.mi_scene = self.geometry.mi_scene
-        self.shape_ids = shape_ids
-        bsdf_textures = getattr(loader, "bsdf_textures", {})
-        meshattr.bind(self.textures, shapes, shape_bsdf, shape_ids, bsdf_textures)
+        self.shape_ids = shapes.ids
+        self.shape_paths = shapes.paths        # key paths, e.g. "scene.red-wall"
+        meshattr.bind(self.textures, shapes.geometry, shapes.bsdf, shapes.ids, bsdf_textures)
         # Texture slots only BSDFs read (in kernels): lights and media also read theirs on
         # the host when building (power estimates, majorants).
         self.bsdf_slots = frozenset().union(*bsdf_textures.values())
-        self.shape_bsdf = mi.UInt32(shape_bsdf)
-        self.shape_light = mi.UInt32(shape_light)     # light index + 1; 0: not emissive
-        self.media = loader.media
-        shape_media = shape_media or [[0, 0]] * len(shape_ids)
+        self.shape_bsdf = mi.UInt32(shapes.bsdf)
+        self.shape_light = mi.UInt32(shapes.light)     # light index + 1; 0: not emissive
         # Medium index + 1 inside / outside each shape (0: vacuum or no transition).
-        self.shape_interior = mi.UInt32([a for a, _ in shape_media])
-        self.shape_exterior = mi.UInt32([b for _, b in shape_media])
-        self.shape_transition = mi.Bool([a > 0 or b > 0 for a, b in shape_media])
+        self.shape_interior = mi.UInt32([a for a, _ in shapes.media])
+        self.shape_exterior = mi.UInt32([b for _, b in shapes.media])
+        self.shape_transition = mi.Bool([a > 0 or b > 0 for a, b in shapes.media])
         self.sensors = sensors
         self.integrator = integrator
         self.build()

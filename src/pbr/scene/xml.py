@@ -23,6 +23,15 @@ from xml.parsers import expat
 
 import numpy as np
 
+from ..bsdfs import bsdf_names
+from ..cameras import SENSORS
+from ..films import FILMS
+from ..filters import FILTERS
+from ..integrators import INTEGRATORS
+from ..lights import LIGHT_TYPES
+from ..media import MEDIUM_TYPES
+from ..phase import PHASE_TYPES
+
 __all__ = ["XMLError", "parse_file", "parse_string"]
 
 
@@ -509,6 +518,18 @@ def _parse(text, file: str, base_dir: str, kwargs: dict) -> dict:
 
 # ----------------------------------------------------------------------------- writing
 
+def _xml_tags():
+    """(XML tag, type names) in the order ``to_xml`` tries them (other types: shapes).
+    Sensors and samplers include Mitsuba types pbr does not render, so that any scene
+    dict is written with the right tags; ``mix`` (a BSDF and a texture) is a BSDF."""
+    return (("bsdf", bsdf_names()), ("emitter", LIGHT_TYPES),
+            ("sensor", {"thinlens", "orthographic"} | set(SENSORS)), ("film", FILMS),
+            ("sampler", {"independent", "stratified", "multijitter"}), ("rfilter", FILTERS),
+            ("integrator", INTEGRATORS), ("spectrum", ("blackbody", "d65", "uniform")),
+            ("texture", ("bitmap", "checkerboard", "scale", "mix", "mesh_attribute")),
+            ("medium", MEDIUM_TYPES), ("phase", PHASE_TYPES))
+
+
 def to_xml(d: dict, base_dir: str | None = None) -> str:
     """Mitsuba 3 XML for a scene dict (the inverse of :func:`parse_string` for the value
     kinds it produces: numbers, booleans, strings, 3-vectors, rgb/spectrum/blackbody
@@ -563,27 +584,9 @@ def to_xml(d: dict, base_dir: str | None = None) -> str:
         raise TypeError(f"to_xml: cannot write parameter {name!r} of type {type(v).__name__}")
 
     def tag_of(t):
-        from ..bsdfs import BSDF_TYPES
-        from .loader import BSDF_LIKE, EMITTER_LIKE
-        if t in BSDF_TYPES or t in BSDF_LIKE:
-            return "bsdf"
-        if t in EMITTER_LIKE:
-            return "emitter"
-        if t in ("perspective", "thinlens", "orthographic"):
-            return "sensor"
-        if t == "hdrfilm":
-            return "film"
-        if t in ("independent", "stratified", "multijitter"):
-            return "sampler"
-        if t in ("box", "tent", "gaussian"):
-            return "rfilter"
-        from ..integrators import INTEGRATORS
-        if t in INTEGRATORS:
-            return "integrator"
-        if t in ("blackbody", "d65", "uniform"):
-            return "spectrum"
-        if t in ("bitmap", "checkerboard", "scale", "mix", "mesh_attribute"):
-            return "texture"
+        for tag, names in _xml_tags():
+            if t in names:
+                return tag
         return "shape"
 
     def obj(v, ind, name=None, oid=None):

@@ -31,8 +31,8 @@ import mitsuba as mi
 import numpy as np
 
 from ...bsdfs.base import ShadingContext
-from ...scene.props import SceneError
-from ..base import SamplingIntegrator, PRIMAL
+from ...plugins.props import SceneError
+from ..base import INTEGRATORS, SamplingIntegrator, PRIMAL
 from . import solvers
 from .bins import WavelengthBins
 from .energy import energy_balance
@@ -98,30 +98,12 @@ def _form_factor_bar(progress, n):
     return tqdm(total=1.0, desc="radiosity form factors", leave=False, bar_format="{l_bar}{bar}| {elapsed}")
 
 
-def _key_paths(loader):
-    """Key paths of the shapes and of the emitters, in the order the loader adds them."""
-    if loader is None:
-        return None, None
-    from ...geometry import SHAPE_PARAMS
-    from ...scene.loader import EMITTER_LIKE
-    shapes, emitters = [], []
-    for key, v in loader.d.items():
-        if not isinstance(v, dict):
-            continue
-        t = v.get("type")
-        if t in SHAPE_PARAMS:
-            shapes.append(f"scene.{key}")
-            emitters += [f"scene.{key}.{k}" for k, c in v.items()
-                         if isinstance(c, dict) and c.get("type") in EMITTER_LIKE]
-        elif t in EMITTER_LIKE:
-            emitters.append(f"scene.{key}")
-    return shapes, emitters
-
-
+@INTEGRATORS.register("radiosity")
 class RadiosityIntegrator(SamplingIntegrator):
     name = "radiosity"
 
     def __init__(self, props):
+        super().__init__(props)
         self.solver = props.string("solver", "gauss_seidel", choices=SOLVERS)
         self.max_area = props.float("max_area", 0.0, min=0.0)
         self.wavelength_bins = props.int("wavelength_bins", 32, min=4)
@@ -132,8 +114,6 @@ class RadiosityIntegrator(SamplingIntegrator):
         self.smooth = props.bool("smooth", False)
         self.seed = props.int("seed", 0, min=0)
         props.finish()
-        self._path = props.path
-        self._shape_paths, self._emitter_paths = _key_paths(props.loader)
         self._scene = None
         self._solution = None
 
@@ -155,9 +135,8 @@ class RadiosityIntegrator(SamplingIntegrator):
 
     def _solve(self, scene, progress):
         t0 = time.perf_counter()
-        paths = self._shape_paths if self._shape_paths and len(self._shape_paths) == len(scene.shape_ids) else None
-        check_materials(scene, paths, self._emitter_paths)
-        patches = Patches(scene, self.max_area, paths)
+        check_materials(scene)
+        patches = Patches(scene, self.max_area)
         bins = WavelengthBins(self.wavelength_bins)
         Le, rho = patches.spectra(scene, bins)
         geo = scene.geometry
@@ -166,7 +145,7 @@ class RadiosityIntegrator(SamplingIntegrator):
         S, seed, F = self.form_factor_samples, self.seed, None
         if self.solver in ("jacobi", "gauss_seidel"):
             if patches.count > MAX_DENSE_PATCHES:
-                raise SceneError(f"{self._path}.max_area: {patches.count} patches exceed the {MAX_DENSE_PATCHES} "
+                raise SceneError(f"{self.path}.max_area: {patches.count} patches exceed the {MAX_DENSE_PATCHES} "
                                  f"of the dense solvers; use solver 'progressive' or 'stochastic_jacobi', "
                                  f"or a larger max_area")
             t1 = time.perf_counter()

@@ -32,7 +32,7 @@ import numpy as np
 
 from ...bsdfs import NO_BACK
 from ...bsdfs.base import ShadingContext
-from ...scene.props import SceneError
+from ...plugins.props import SceneError
 from ...spectrum import SampledWavelengths
 
 MAX_SPLIT = 4096            # edge segments per triangle (n^2 patches)
@@ -73,7 +73,7 @@ class Patches:
     ``vertices`` (V, 3) and ``faces`` (N, 3): the welded subdivided meshes.
     """
 
-    def __init__(self, scene, max_area: float = 0.0, shape_paths=None):
+    def __init__(self, scene, max_area: float = 0.0):
         shapes = scene.mi_scene.shapes()
         to_mi = self.mi_index = scene.geometry.mi_index
         cols = {k: [] for k in ("p", "normal", "area", "shape", "prim", "bary", "key")}
@@ -83,8 +83,7 @@ class Patches:
         for s in range(len(to_mi)):
             shape = shapes[int(to_mi[s])]
             if not shape.is_mesh():
-                where = shape_paths[s] if shape_paths else f"scene.{scene.shape_ids[s]}"
-                raise SceneError(f"{where}: the radiosity integrator needs triangle meshes (rectangle, cube, "
+                raise SceneError(f"{scene.shape_paths[s]}: the radiosity integrator needs triangle meshes (rectangle, cube, "
                                  f"obj, ply); a {shape.class_name().lower()} is not one")
             v, f = _mesh(shape)
             shape_tri.append(n_tri)
@@ -263,15 +262,14 @@ class Patches:
         return binned(Le), binned(rho)
 
 
-def check_materials(scene, shape_paths=None, emitter_paths=None) -> None:
+def check_materials(scene) -> None:
     """SceneError unless every shape is a plain one-sided ``diffuse`` reflector, the
-    lights are ``area`` emitters and no shape bounds a medium. ``*_paths`` are the key
-    paths of the shapes and emitters in loading order (``scene.<id>`` when unknown)."""
+    lights are ``area`` emitters and no shape bounds a medium (naming the key path)."""
     bs = scene.bsdfs
     shape_bsdf = np.array(scene.shape_bsdf, dtype=np.int64)
     transition = np.array(scene.shape_transition, dtype=bool)
     for s, b in enumerate(shape_bsdf):
-        where = shape_paths[s] if shape_paths else f"scene.{scene.shape_ids[s]}"
+        where = scene.shape_paths[s]
         fam, _, back, opacity = bs.entries[b]
         kind = ("blendbsdf" if b in bs.blend_of else "normalmap/bumpmap" if b in bs.perturb_of
                 else "twosided" if back != NO_BACK else "mask" if opacity != NO_BACK else fam)
@@ -281,7 +279,6 @@ def check_materials(scene, shape_paths=None, emitter_paths=None) -> None:
             raise SceneError(f"{where}: the radiosity integrator does not support media (interior/exterior)")
     if len(scene.media):
         raise SceneError("scene: the radiosity integrator does not support participating media")
-    for i, (t, _) in enumerate(scene.lights.entries):
+    for where, (t, _) in zip(scene.lights.paths, scene.lights.entries):
         if t != "area":
-            where = emitter_paths[i] if emitter_paths and i < len(emitter_paths) else "scene"
             raise SceneError(f"{where}: the radiosity integrator supports only 'area' emitters, got {t!r}")

@@ -17,7 +17,7 @@ import mitsuba as mi
 import numpy as np
 
 from ...samplers import IndependentSampler
-from ...scene.props import Props
+from ...plugins.props import Props
 from ...spectrum import SampledWavelengths
 from ..base import PRIMAL
 from ..path import PathIntegrator

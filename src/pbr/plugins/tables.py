@@ -1,25 +1,16 @@
 """The scene's Dr.Jit tables as a whole: one walk over the arrays that pbr's scene
-objects hold (texture, BSDF, light and medium tables), for the two operations that must
-see all of them.
-
-``own_table_memory``: NumPy-mapped tables get aligned memory, so that kernels compiled
-against them do not change from one ``params.update()`` to the next.
-
-``tables_as_leaves``: forward-mode differentiation inside a symbolic loop can only start
-from variables whose tangents are already known; it may not cross an edge built outside
-the loop (Dr.Jit: "outside of the current dr.isolate_grad() scope"). The tables built
-from parameters are such edges, so for a forward pass they are replaced by leaves that
-carry the tangent the parameters give them.
+objects hold (texture, BSDF, light and medium tables), for the operations that must see
+all of them: aligned memory (:func:`own_table_memory`), forward-mode leaves
+(:func:`pbr.scene.params.tables_as_leaves`) and ``pbr.freeze``'s state.
 """
 
 from __future__ import annotations
-
-import contextlib
 
 import drjit as dr
 import numpy as np
 
 from ..backend import get_backend
+from .params import ParamOwner
 
 
 def map_tables(root, fn) -> None:
@@ -57,7 +48,7 @@ def map_tables(root, fn) -> None:
             for k, v in x.items():
                 x[k] = visit(v)
         elif type(x).__module__.startswith("pbr") and hasattr(x, "__dict__"):
-            user = "params" if any(c.__name__ == "ParamOwner" for c in type(x).__mro__) else None
+            user = "params" if isinstance(x, ParamOwner) else None
             for k, v in vars(x).items():
                 if k != user:
                     c = visit(v)
@@ -93,40 +84,3 @@ def own_table_memory(root) -> None:
         return type(x)(aligned)                  # mapped in turn; Dr.Jit keeps it alive
 
     map_tables(root, realign)
-
-
-@contextlib.contextmanager
-def tables_as_leaves(scene, tangents: dict):
-    """Within the block, the scene's tables are built from fresh copies of the parameters
-    whose tangents are ``tangents`` (key -> tangent), then replaced by leaves holding the
-    tangent each table receives; afterwards the parameters and tables are restored."""
-    from .params import traverse
-    params = traverse(scene)
-    originals = {k: params[k] for k in tangents}
-    try:
-        with dr.resume_grad():
-            leaves = []
-            for k, t in tangents.items():
-                leaf = dr.detach(originals[k])
-                dr.enable_grad(leaf)
-                dr.set_grad(leaf, t)
-                params[k] = leaf
-                leaves.append(leaf)
-            params.update()
-            dr.enqueue(dr.ADMode.Forward, *leaves)
-            dr.traverse(dr.ADMode.Forward, flags=dr.ADFlag.ClearEdges)
-
-            def as_leaf(x):
-                if not dr.grad_enabled(x):
-                    return x
-                y = dr.detach(x)
-                dr.enable_grad(y)
-                dr.set_grad(y, dr.grad(x))
-                return y
-
-            map_tables(scene, as_leaf)
-        yield
-    finally:
-        for k, v in originals.items():
-            params[k] = v
-        params.update()

@@ -1,0 +1,418 @@
+"""``BSDFSet``: every BSDF of a scene and the per-scene dispatch over their families.
+
+A scene's BSDFs get global ids (entries); ``BSDFSet`` maps an entry to (family, index in
+family) and calls the family's vectorised code. With a single family the call is
+direct; with several it is a ``dr.switch`` over only the families the scene uses.
+Mitsuba's ``twosided``, ``mask``, ``blendbsdf`` (pbrt-v4's ``mix``), ``normalmap`` and
+``bumpmap`` are not families but attributes of an entry (:data:`WRAPPERS`).
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from .. import dispatch
+from ..plugins.props import SceneError
+from ..spectrum import luminance_rgb
+from ..textures import load_spectrum
+from . import perturb
+from .base import BSDF_TYPES, BSDFSample, BSDFType, ShadingContext, DIFFUSE, GLOSSY, TRANSMISSION
+from .null import pass_through
+
+NO_BACK = 0xFFFFFFFF
+
+
+class BSDFSet:
+    """All BSDFs of a scene. Entry ``i`` is (family, index in family, back entry, opacity).
+
+    ``twosided`` and ``mask`` (Mitsuba's) are not families but entry attributes:
+    ``twosided`` keeps the front BSDF's entry with a back entry (the second nested BSDF, or
+    the front one again); where the incident direction lies below the surface the
+    dispatcher mirrors both directions and uses the back entry. ``mask`` adds an opacity
+    texture: with probability 1 - opacity light passes straight through (``null``)."""
+
+    def __init__(self):
+        self.families: dict[str, BSDFType] = {}
+        self.entries: list[tuple[str, int, int, int]] = []
+        self.blend_of: dict[int, tuple[int, int, int]] = {}   # blend entry -> (a, b, weight slot)
+        self.perturb_of: dict[int, tuple] = {}   # normal/bump-mapped entry -> (kind, slot, scale, flip, shadow)
+
+    def add(self, loader, props) -> int:
+        """Parse one BSDF (a family instance or a wrapper); returns its entry."""
+        t = props.type
+        if t in WRAPPERS:
+            return getattr(self, WRAPPERS[t])(loader, props)
+        if t not in BSDF_TYPES:
+            raise props.error(None, f"unsupported BSDF type {t!r} (supported: {', '.join(sorted(bsdf_names()))})")
+        fam = self.families.setdefault(t, BSDF_TYPES[t]())
+        local = fam.add(loader, props)
+        self.entries.append((t, local, NO_BACK, NO_BACK))
+        return len(self.entries) - 1
+
+    def _add_blend(self, loader, props) -> int:
+        """Mitsuba's ``blendbsdf`` (``weight``, two nested BSDFs) / pbrt-v4's ``mix``
+        (``amount``): f = (1 - w) f_0 + w f_1."""
+        wkey = "weight" if props.type == "blendbsdf" else "amount"
+        nested = [k for k, v in props.children() if k != wkey]
+        if len(nested) != 2:
+            raise props.error(None, f"{props.type} takes exactly two nested BSDFs, got {len(nested)}")
+        weight = load_spectrum(loader, props.raw(wkey, 0.5), props.key(wkey), emitter=False)
+        ids = [loader.bsdf(props.raw(k), props.key(k)) for k in nested]
+        props.finish()
+        for i, k in zip(ids, nested):
+            if i in self.blend_of:
+                raise props.error(k, f"a {props.type} cannot contain another blend")
+        # A blend entry points at its first component (used where it is not a blend).
+        self.entries.append(self.entries[ids[0]])
+        self.blend_of[len(self.entries) - 1] = (ids[0], ids[1], weight)
+        return len(self.entries) - 1
+
+    def _add_perturbed(self, loader, props) -> int:
+        kind, slot, scale, flip, shadow, key = perturb.parse(loader, props, bsdf_names())
+        inner = loader.bsdf(props.raw(key), props.key(key))
+        props.finish()
+        if inner in self.perturb_of or inner in self.blend_of:
+            raise props.error(key, f"a {props.type} cannot wrap another normal/bump map or a blend")
+        self.entries.append(self.entries[inner])
+        self.perturb_of[len(self.entries) - 1] = (kind, slot, scale, flip, shadow)
+        return len(self.entries) - 1
+
+    def _add_mask(self, loader, props) -> int:
+        nested = [k for k, v in props.children() if k != "opacity"]
+        if len(nested) != 1:
+            raise props.error(None, f"mask takes exactly one nested BSDF, got {len(nested)}")
+        opacity = load_spectrum(loader, props.raw("opacity", 0.5), props.key("opacity"), emitter=False)
+        inner = loader.bsdf(props.raw(nested[0]), props.key(nested[0]))
+        props.finish()
+        fam, local, back, op = self.entries[inner]
+        if op != NO_BACK:
+            raise props.error(nested[0], "a mask cannot contain another mask")
+        self.entries.append((fam, local, back, opacity))
+        if inner in self.perturb_of:
+            self.perturb_of[len(self.entries) - 1] = self.perturb_of[inner]
+        return len(self.entries) - 1
+
+    def _add_twosided(self, loader, props) -> int:
+        nested = [k for k, v in props.children()]
+        if not 1 <= len(nested) <= 2:
+            raise props.error(None, f"twosided takes one or two nested BSDFs, got {len(nested)}")
+        ids = [loader.bsdf(props.raw(k), props.key(k)) for k in nested]
+        props.finish()
+        for i, k in zip(ids, nested):
+            if self.entries[i][2] != NO_BACK:
+                raise props.error(k, "a twosided BSDF cannot contain another twosided BSDF")
+        front, back = ids[0], ids[-1]
+        fam, local, _, opacity = self.entries[front]
+        self.entries.append((fam, local, back, opacity))
+        if front in self.perturb_of:
+            self.perturb_of[len(self.entries) - 1] = self.perturb_of[front]
+        return len(self.entries) - 1
+
+    def build(self, textures) -> None:
+        self.order = list(self.families)
+        for f in self.families.values():
+            f.textures = textures
+            f.build()
+        self.textures = textures
+        self.family_of = mi.UInt32([self.order.index(t) for t, _, _, _ in self.entries])
+        self.local_of = mi.UInt32([i for _, i, _, _ in self.entries])
+        self.back_of = mi.UInt32([b for _, _, b, _ in self.entries])
+        self.opacity_of = mi.UInt32([o for _, _, _, o in self.entries])
+        self.twosided = any(b != NO_BACK for _, _, b, _ in self.entries)
+        n = len(self.entries)
+        blend = [self.blend_of.get(i, (i, i, NO_BACK)) for i in range(n)]
+        self.blend_a = mi.UInt32([x[0] for x in blend])
+        self.blend_b = mi.UInt32([x[1] for x in blend])
+        self.blend_w = mi.UInt32([x[2] for x in blend])
+        self.blends = bool(self.blend_of)
+        pert = [self.perturb_of.get(i, (0, NO_BACK, 0.0, True, True)) for i in range(n)]
+        self.pert_kind = mi.UInt32([x[0] for x in pert])
+        self.pert_slot = mi.UInt32([x[1] for x in pert])
+        self.pert_scale = mi.Float([x[2] for x in pert])
+        kinds = {x[0] for x in self.perturb_of.values()}
+        self.pert_kinds = kinds
+        self.pert_flip = {x[3] for x in self.perturb_of.values()}
+        self.pert_shadow = {x[4] for x in self.perturb_of.values()}
+        if len(self.pert_flip) > 1 or len(self.pert_shadow) > 1:
+            raise SceneError("scene: normal/bump maps of one scene must share flip_invalid_normals "
+                             "and use_shadowing_function (for now)")
+        # Entries with a non-delta lobe (light sampling is pointless on the others).
+        fam_smooth = {t: bool(f.flags & (DIFFUSE | GLOSSY)) for t, f in self.families.items()}
+        smooth = [fam_smooth[t] for t, _, _, _ in self.entries]
+        for i, (a, b, _) in self.blend_of.items():
+            smooth[i] = smooth[a] or smooth[b]
+        self.smooth_of = mi.Bool(smooth)
+        self.all_smooth = all(smooth)
+        # Entries whose sample weight is a random estimate (see BSDFType.stochastic).
+        stoch = [self.families[t].stochastic or (b != NO_BACK and self.families[self.entries[b][0]].stochastic)
+                 for t, _, b, _ in self.entries]
+        for i, (a, b, _) in self.blend_of.items():
+            stoch[i] = stoch[a] or stoch[b]
+        self.stochastic_of = mi.Bool(stoch)
+        self.any_stochastic = any(stoch)
+        self.masked = any(o != NO_BACK for _, _, _, o in self.entries)
+        # Pure ``null`` entries: index-matched medium boundaries, skipped by volpath.
+        null = [t == "null" and i not in self.blend_of for i, (t, _, _, _) in enumerate(self.entries)]
+        self.null_of = mi.Bool(null)
+        self.has_null = any(null)
+
+    def smooth(self, bsdf_id, active):
+        """True where the entry has a non-delta lobe (worth sampling a light for)."""
+        if self.all_smooth:
+            return mi.Bool(True)
+        return dr.gather(mi.Bool, self.smooth_of, bsdf_id, active)
+
+    def stochastic(self, bsdf_id, active):
+        """True where the entry's sample weight is a random estimate that ``eval`` does not
+        reproduce (a layered BSDF): gradients differentiate the sample's own weight."""
+        if not self.any_stochastic:
+            return mi.Bool(False)
+        return dr.gather(mi.Bool, self.stochastic_of, bsdf_id, active)
+
+    def is_null(self, bsdf_id, active):
+        """True where the entry is a pure ``null`` BSDF (light passes unchanged)."""
+        if not self.has_null:
+            return mi.Bool(False)
+        return dr.gather(mi.Bool, self.null_of, bsdf_id, active)
+
+    @property
+    def dispersive(self) -> bool:
+        """Whether some BSDF refracts by a wavelength-dependent IOR."""
+        return any(getattr(f, "dispersive", False) for f in self.families.values())
+
+    def has_flag(self, flag: int) -> bool:
+        return any(f.flags & flag for f in self.families.values())
+
+    def entry_flags(self) -> list[int]:
+        """Lobe flags of every entry (after ``build``): its family's, both components' for
+        a blend, plus TRANSMISSION where a mask lets light through."""
+        def flags(i):
+            t, _, _, opacity = self.entries[i]
+            fl = self.families[t].flags | (TRANSMISSION if opacity != NO_BACK else 0)
+            if i in self.blend_of:
+                a, b, _ = self.blend_of[i]
+                fl |= flags(a) | flags(b)
+            return fl
+        return [flags(i) for i in range(len(self.entries))]
+
+    def shading_normal(self, bsdf_id, ctx, active):
+        """World shading normal of entry ``bsdf_id`` at ``ctx.si``, after its normal or
+        bump map (Mitsuba's ``BSDF::sh_frame``)."""
+        n = ctx.si.sh_frame.n
+        pert = self._perturb(bsdf_id, ctx, active)
+        if pert is None:
+            return n
+        _, frame, has = pert
+        return dr.select(has, ctx.si.to_world(frame.n), n)
+
+    def _dispatch(self, method, bsdf_id, ctx, active, *args):
+        local = dr.gather(mi.UInt32, self.local_of, bsdf_id, active)
+        fams = [self.families[t] for t in self.order]
+        if len(fams) == 1:
+            return _cast(getattr(fams[0], method)(ctx, local, *args, active))
+        fam = dr.gather(mi.UInt32, self.family_of, bsdf_id, active)
+        return dispatch.switch(fam, [_typed(getattr(f, method)) for f in fams], ctx, local, *args, active)
+
+    def _side(self, bsdf_id, ctx, active):
+        """(entry to use, context, flip mask) after applying two-sidedness."""
+        if not self.twosided:
+            return bsdf_id, ctx, None
+        back = dr.gather(mi.UInt32, self.back_of, bsdf_id, active)
+        flip = (back != NO_BACK) & (ctx.si.wi.z < 0)
+        si = mi.SurfaceInteraction3f(ctx.si)
+        si.wi = _flip(si.wi, flip)
+        return dr.select(flip, back, bsdf_id), ShadingContext(si, ctx.wl), flip
+
+    def _opacity(self, bsdf_id, ctx, active):
+        """Opacity of masked entries (1 elsewhere), or None if the scene has no mask."""
+        if not self.masked:
+            return None
+        slot = dr.gather(mi.UInt32, self.opacity_of, bsdf_id, active)
+        has = active & (slot != NO_BACK)
+        o = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, has, illuminant=False)[0]
+        return dr.select(has, dr.clip(o, 0.0, 1.0), 1.0)
+
+    def _perturb(self, bsdf_id, ctx, active):
+        """(context in the perturbed frame, local frame, mask) for normal/bump-mapped
+        entries, or None if the scene has none."""
+        if not self.perturb_of:
+            return None
+        kind = dr.gather(mi.UInt32, self.pert_kind, bsdf_id, active)
+        has = active & (kind != 0)
+        slot = dr.gather(mi.UInt32, self.pert_slot, bsdf_id, has)
+        value, du, dv = self.textures.eval_raw(slot, ctx.si.uv, has)
+        flip = next(iter(self.pert_flip))
+        si = mi.SurfaceInteraction3f(ctx.si)
+        frame = mi.Frame3f(mi.Vector3f(1, 0, 0), mi.Vector3f(0, 1, 0), mi.Vector3f(0, 0, 1))
+        if perturb.NORMAL in self.pert_kinds:
+            fn = perturb.normalmap_frame(value, si.wi, flip)
+            frame = dr.select(has & (kind == perturb.NORMAL), fn, frame)
+        if perturb.BUMP in self.pert_kinds:
+            scale = dr.gather(mi.Float, self.pert_scale, bsdf_id, has)
+            lum = lambda g: luminance_rgb(g) * scale  # noqa: E731
+            fb = perturb.bumpmap_frame(si, lum(du), lum(dv), flip)
+            frame = dr.select(has & (kind == perturb.BUMP), fb, frame)
+        si.wi = frame.to_local(ctx.si.wi)
+        return ShadingContext(si, ctx.wl), frame, has
+
+    def _resolve(self, bsdf_id, ctx, wo, active):
+        """Apply the entry attributes that change the frame: the side (twosided, with
+        ``wo`` mirrored alongside) and the normal/bump perturbation. Returns (entry,
+        context, wo, flip mask or None, perturbation or None)."""
+        bsdf_id, ctx, flip = self._side(bsdf_id, ctx, active)
+        if flip is not None and wo is not None:
+            wo = _flip(wo, flip)
+        return bsdf_id, ctx, wo, flip, self._perturb(bsdf_id, ctx, active)
+
+    @staticmethod
+    def _to_perturbed(frame, has, wo):
+        """``wo`` in the perturbed frame, and where it lies on the same side of both
+        surfaces (elsewhere a normal/bump map would leak light)."""
+        wo_p = frame.to_local(wo)
+        return wo_p, ~has | (wo.z * wo_p.z > 0)
+
+    def _perturbed_value(self, frame, has, wo, ok, f, pdf=None):
+        """Apply the shadow-terminator term and the leak mask to values toward ``wo``."""
+        if next(iter(self.pert_shadow)):
+            f = f * dr.select(has, perturb.shadow_terminator(frame.n, wo), 1.0)
+        return dr.select(ok, f, 0.0), (None if pdf is None else dr.select(ok, pdf, 0.0))
+
+    def _entry_eval_pdf(self, bsdf_id, ctx, wo, active):
+        opacity = self._opacity(bsdf_id, ctx, active)
+        bsdf_id, ctx, wo, flip, pert = self._resolve(bsdf_id, ctx, wo, active)
+        if pert is not None:
+            ctx, frame, has = pert
+            wo_p, ok = self._to_perturbed(frame, has, wo)
+            f, pdf = self._dispatch("eval_pdf", bsdf_id, ctx, active & ok, wo_p)
+            f, pdf = self._perturbed_value(frame, has, wo, ok, f, pdf)
+        else:
+            f, pdf = self._dispatch("eval_pdf", bsdf_id, ctx, active, wo)
+        if opacity is not None:
+            f, pdf = f * opacity, pdf * opacity
+        return f, pdf
+
+    def _dispatch_eval_pdf_sample(self, bsdf_id, ctx, active, wo, u1, u2):
+        """The families' ``eval_pdf_sample``, or their ``sample`` alone (f, pdf None)
+        when there is no ``wo`` to evaluate."""
+        if wo is None:
+            return None, None, self._dispatch("sample", bsdf_id, ctx, active, u1, u2)
+        return self._dispatch("eval_pdf_sample", bsdf_id, ctx, active, wo, u1, u2)
+
+    def _entry_eval_pdf_sample(self, bsdf_id, ctx, wo, u1, u2, active):
+        opacity = self._opacity(bsdf_id, ctx, active)
+        wi_world_side = ctx.si.wi
+        if opacity is not None:
+            # Pass straight through with probability 1 - opacity; reuse u1 otherwise.
+            through = u1 >= opacity
+            u1 = dr.select(through, u1, u1 / dr.maximum(opacity, 1e-12))
+        bsdf_id, ctx, wo, flip, pert = self._resolve(bsdf_id, ctx, wo, active)
+        if pert is not None:
+            ctx, frame, has = pert
+            wo_p, ok = (None, None) if wo is None else self._to_perturbed(frame, has, wo)
+            f, pdf, bs = self._dispatch_eval_pdf_sample(bsdf_id, ctx, active, wo_p, u1, u2)
+            if wo is not None:
+                f, pdf = self._perturbed_value(frame, has, wo, ok, f, pdf)
+            wo_s = dr.select(has, frame.to_world(bs.wo), bs.wo)
+            ok_s = ~has | (bs.wo.z * wo_s.z > 0)
+            bs.wo = wo_s
+            bs.weight = self._perturbed_value(frame, has, wo_s, ok_s, bs.weight)[0]
+            bs.pdf = dr.select(ok_s, bs.pdf, 0.0)
+        else:
+            f, pdf, bs = self._dispatch_eval_pdf_sample(bsdf_id, ctx, active, wo, u1, u2)
+        if flip is not None:
+            bs.wo = _flip(bs.wo, flip)
+        if opacity is not None:
+            if wo is not None:
+                f, pdf = f * opacity, pdf * opacity
+            bs.pdf = bs.pdf * opacity
+            null = pass_through(wi_world_side, 1.0 - opacity, active & through)
+            bs = dr.select(through, _cast(null), _cast(bs))
+        return f, pdf, bs
+
+    # -- public interface: handles blends over the entry-level methods above --------------
+    def _blend(self, bsdf_id, ctx, active):
+        """(component a, component b, weight of b, is-blend mask) per lane."""
+        slot = dr.gather(mi.UInt32, self.blend_w, bsdf_id, active)
+        is_blend = active & (slot != NO_BACK)
+        w = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, is_blend, illuminant=False)[0]
+        a = dr.select(is_blend, dr.gather(mi.UInt32, self.blend_a, bsdf_id, is_blend), bsdf_id)
+        b = dr.gather(mi.UInt32, self.blend_b, bsdf_id, is_blend)
+        return a, b, dr.select(is_blend, dr.clip(w, 0.0, 1.0), 0.0), is_blend
+
+    def eval_pdf(self, bsdf_id, ctx, wo, active):
+        """(f |cos theta_o|, pdf) of entry ``bsdf_id`` for local direction ``wo``."""
+        if not self.blends:
+            return self._entry_eval_pdf(bsdf_id, ctx, wo, active)
+        a, b, w, is_blend = self._blend(bsdf_id, ctx, active)
+        fa, pa = self._entry_eval_pdf(a, ctx, wo, active)
+        fb, pb = self._entry_eval_pdf(b, ctx, wo, is_blend)
+        return dr.fma(w, fb - fa, fa), dr.fma(w, pb - pa, pa)
+
+    def sample(self, bsdf_id, ctx, u1, u2, active) -> BSDFSample:
+        """A sampled direction of entry ``bsdf_id`` (no evaluation toward another ``wo``)."""
+        return self.eval_pdf_sample(bsdf_id, ctx, None, u1, u2, active)[2]
+
+    def eval_pdf_sample(self, bsdf_id, ctx, wo, u1, u2, active):
+        """``eval_pdf(wo)`` and a sampled direction at once (``wo`` None: the sample only,
+        f and pdf None). For a blend, one component is sampled (chosen with its weight) but
+        a non-delta sample reports the mixture's pdf and f / pdf, so that MIS sees the
+        density the direction really has."""
+        if not self.blends:
+            return self._entry_eval_pdf_sample(bsdf_id, ctx, wo, u1, u2, active)
+        a, b, w, is_blend = self._blend(bsdf_id, ctx, active)
+        take_b = is_blend & (u1 < w)
+        u1 = dr.select(is_blend, dr.select(take_b, u1 / dr.maximum(w, 1e-12), (u1 - w) / dr.maximum(1.0 - w, 1e-12)), u1)
+        chosen = dr.select(take_b, b, a)
+        f, pdf, bs = self._entry_eval_pdf_sample(chosen, ctx, wo, u1, u2, active)
+        other = dr.select(take_b, a, b)
+        wc = dr.select(take_b, w, 1.0 - w)
+        if wo is not None:
+            # eval toward wo: the other component as well.
+            fo, po = self._entry_eval_pdf(other, ctx, wo, is_blend)
+            f = dr.select(is_blend, wc * f + (1.0 - wc) * fo, f)
+            pdf = dr.select(is_blend, wc * pdf + (1.0 - wc) * po, pdf)
+        # The sampled direction: mixture density and weight unless the lobe was a delta.
+        mix = is_blend & ~bs.delta & (bs.pdf > 0)
+        f_c = bs.weight * bs.pdf
+        f2, p2 = self._entry_eval_pdf(other, ctx, bs.wo, mix)
+        p_mix = wc * bs.pdf + (1.0 - wc) * p2
+        f_mix = wc * f_c + (1.0 - wc) * f2
+        bs.weight = dr.select(mix, f_mix / dr.maximum(p_mix, 1e-30), bs.weight)
+        bs.pdf = dr.select(mix, p_mix, dr.select(is_blend, bs.pdf * wc, bs.pdf))
+        return f, pdf, bs
+
+
+# Wrapper type name -> the BSDFSet method that parses it.
+WRAPPERS = {"twosided": "_add_twosided", "mask": "_add_mask", "blendbsdf": "_add_blend", "mix": "_add_blend",
+            "normalmap": "_add_perturbed", "bumpmap": "_add_perturbed"}
+
+
+def bsdf_names() -> set:
+    """Every type name that describes a BSDF (families and wrappers)."""
+    return set(BSDF_TYPES) | set(WRAPPERS)
+
+
+def _flip(v, mask):
+    """Mirror a local direction through the surface where ``mask``."""
+    return mi.Vector3f(v.x, v.y, dr.select(mask, -v.z, v.z))
+
+
+def _cast(v):
+    """Identical types for values of any family (``dr.switch``/``dr.select`` need them):
+    spectra as ``mi.Spectrum``, densities as ``mi.Float``."""
+    if isinstance(v, BSDFSample):
+        return BSDFSample(mi.Vector3f(v.wo), mi.Float(v.pdf), mi.Float(v.eta), mi.Bool(v.delta),
+                          mi.Spectrum(v.weight), mi.Bool(v.terminate))
+    if isinstance(v, tuple):
+        return tuple(_cast(x) for x in v)
+    if dr.size_v(v) == 4:
+        return mi.Spectrum(v)
+    return mi.Float(v)
+
+
+def _typed(fn):
+    """Wrap a family method so that every family returns identical types."""
+    def wrapped(*args):
+        return _cast(fn(*args))
+    return wrapped

@@ -1,0 +1,385 @@
+"""Participating media and :class:`MediumSet`, the per-scene table of them.
+
+Model (pbrt-v4's): at a point ``p`` a medium has absorption and scattering coefficients
+``sigma_a``, ``sigma_s`` (1/length, spectral), emitted radiance ``Le`` (scaled by
+``sigma_a`` in the RTE) and a phase function. Each medium is described by two factors,
+each a constant spectrum times an optional voxel grid:
+
+- Mitsuba form (``homogeneous``, ``heterogeneous``): ``sigma_t = scale * S1 * G1(p)``,
+  ``albedo = S2 * G2(p)``, ``sigma_s = albedo * sigma_t``, ``sigma_a = sigma_t - sigma_s``;
+- pbrt-v4 form (``homogeneous`` given ``sigma_a``/``sigma_s``, ``uniformgrid``,
+  ``rgbgrid``): ``sigma_a = scale * S1 * G1(p)``, ``sigma_s = scale * S2 * G2(p)``.
+
+Free-flight sampling is against a majorant ``sigma_maj >= sigma_t``: exactly ``sigma_t``
+in homogeneous media; in grid media a piecewise-constant bound over a coarse 16^3 grid
+of cells (pbrt-v4's ``MajorantGrid``), walked with a DDA (:mod:`.majorant`), so sparse
+media are not sampled against their global maximum.
+
+Media attach to shapes as ``interior``/``exterior`` and to the sensor (``medium``), as in
+Mitsuba: a ray crossing a shape that has media enters ``interior`` when it goes against
+the shape's normal, ``exterior`` otherwise; a side without a medium is vacuum.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from ..backend import Struct
+from ..phase import HG, PHASE_TYPES, G_MAX, phase_eval, phase_sample
+from ..plugins.params import ParamOwner, param_table
+from ..plugins.props import Props, SceneError
+from ..plugins.registry import Registry
+from ..textures import load_spectrum
+from .grid import GridTable, MAJORANT_RES, as_grid, cell_maxima, read_vol
+
+# Type name -> the MediumSet method that parses a medium of that type.
+MEDIUM_TYPES = Registry("medium")
+MEDIUM_TYPES.update(homogeneous="_homogeneous", heterogeneous="_heterogeneous", uniformgrid="_uniformgrid",
+                    rgbgrid="_rgbgrid")
+
+TA, AS = 0, 1          # parameter forms: (sigma_t, albedo) or (sigma_a, sigma_s)
+NO_GRID = 0xFFFFFFFF
+
+
+class MediumProperties(Struct):
+    """Coefficients of a medium at a point, for the sampled wavelengths."""
+
+    _fields = {"sigma_a": "Spectrum", "sigma_s": "Spectrum", "Le": "Spectrum"}
+
+
+class _Medium:
+    """One medium as parsed: two (spectrum slot, grid) factors, scale, emission, phase."""
+
+    def __init__(self, path):
+        self.path = path
+        self.form = TA
+        self.s1 = self.s2 = None
+        self.g1 = self.g2 = NO_GRID
+        self.scale = 1.0
+        self.le = None
+        self.ge = NO_GRID
+        self.le_scale = 1.0
+        self.to_local = None          # (4, 4) world -> unit cube, grid media only
+        self.phase = (HG, 0.0)
+
+
+class MediumSet:
+    def __init__(self):
+        self.media: list[_Medium] = []
+        self.grids = GridTable()
+
+    def param_owners(self) -> list:
+        """Differentiable medium parameters besides the constant spectra (textures):
+        single-channel voxel grids (``<medium>.<sigma_t|albedo>.data``) and ``scale``."""
+        return [o for _, o in self.grids.owners] + [m.owner for m in self.media]
+
+    def __len__(self):
+        return len(self.media)
+
+    # -- loading ---------------------------------------------------------------------
+    def add(self, loader, props: Props) -> int:
+        m = _Medium(props.path)
+        if props.type not in MEDIUM_TYPES:
+            raise props.error(None, f"unknown medium type {props.type!r} (supported: {MEDIUM_TYPES.supported()})")
+        getattr(self, MEDIUM_TYPES[props.type])(loader, props, m)
+        self._emission(loader, props, m)
+        m.owner = ParamOwner(props.path, scale=mi.Float(m.scale))
+        m.phase = self._phase(props)
+        if props.has("sample_emitters") and not props.bool("sample_emitters"):
+            raise props.error("sample_emitters", "only sample_emitters=true is supported")
+        props.mark("has_spectral_extinction")
+        props.finish()
+        self.media.append(m)
+        return len(self.media) - 1
+
+    def _spectrum(self, loader, props, name, default, bounded=False):
+        """A constant spectrum slot (float, rgb, spectrum, or Mitsuba's constvolume)."""
+        v = props.raw(name, default)
+        path = props.key(name)
+        if isinstance(v, dict) and v.get("type") == "constvolume":
+            p = Props(v, path, loader)
+            v = p.raw("value", 1.0)
+            path = p.key("value")
+            p.finish()
+        if isinstance(v, dict) and v.get("type") not in ("rgb", "spectrum", "blackbody", "d65", "ref"):
+            raise SceneError(f"{path}: expected a float, rgb, spectrum or constvolume, got type {v.get('type')!r}")
+        unbounded = False
+        if isinstance(v, dict) and v.get("type") == "rgb":
+            rgb = np.asarray(v.get("value", 0.0), np.float64).ravel()
+            if bounded and (np.any(rgb < 0) or np.any(rgb > 1)):
+                raise SceneError(f"{path}.value: an albedo must lie in [0, 1], got {rgb.tolist()}")
+            # RGB values within [0, 1] use the reflectance upsampling (as Mitsuba does);
+            # larger ones pbrt-v4's unbounded form (Mitsuba would squash them).
+            unbounded = bool(np.any(rgb > 1))
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            if v < 0 or (bounded and v > 1):
+                raise SceneError(f"{path}: expected a value in [0, {'1' if bounded else 'inf'}), got {v}")
+        slot = load_spectrum(loader, v, path, emitter=False, unbounded=unbounded)
+        if loader.textures.kind_of(slot) != 0:
+            raise SceneError(f"{path}: a medium coefficient must be a constant spectrum (not a texture)")
+        return slot
+
+    def _volume(self, loader, props, name, default, m, form):
+        """A Mitsuba volume parameter: (spectrum slot, grid index or NO_GRID)."""
+        v = props.raw(name, default)
+        if isinstance(v, dict) and v.get("type") == "gridvolume":
+            gid, to_local = self._gridvolume(loader, Props(v, props.key(name), loader), form, props.key(name))
+            self._set_bounds(m, to_local, props.key(name))
+            return load_spectrum(loader, 1.0, props.key(name), emitter=False), gid
+        return self._spectrum(loader, props, name, default, bounded=(form == "albedo")), NO_GRID
+
+    def _gridvolume(self, loader, p: Props, form, path):
+        if p.has("filename"):
+            data, bbox = read_vol(loader.resolve_path(p.string("filename"), p.key("filename")))
+        elif p.has("data"):
+            data, bbox = as_grid(np.asarray(p.raw("data")), p.key("data")), np.array([[0, 0, 0], [1, 1, 1.0]])
+        else:
+            raise p.error(None, "a gridvolume needs 'filename' or 'data'")
+        if not np.all(np.isfinite(data)) or np.any(data < 0):
+            raise p.error("filename" if p.has("filename") else "data", "grid values must be finite and >= 0")
+        p.string("filter_type", "trilinear", choices=("trilinear",))
+        p.string("wrap_mode", "clamp", choices=("clamp",))
+        to_world = p.transform("to_world")
+        if p.bool("use_grid_bbox", False):
+            lo, hi = bbox[0], bbox[1]
+            box = np.diag([*(hi - lo), 1.0])
+            box[:3, 3] = lo
+            to_world = to_world @ box
+        if p.has("raw") and p.bool("raw"):
+            raise p.error("raw", "raw=true grids are not supported (RGB grids are upsampled to spectra)")
+        p.mark("accel", "max_value")
+        p.finish()
+        try:
+            to_local = np.linalg.inv(to_world)
+        except np.linalg.LinAlgError:
+            raise p.error("to_world", "the grid transform is singular") from None
+        return self.grids.add(data, form, path), to_local
+
+    @staticmethod
+    def _set_bounds(m, to_local, where):
+        if m.to_local is not None and not np.allclose(m.to_local, to_local, atol=1e-6):
+            raise SceneError(f"{where}: all grids of one medium must share the same to_world")
+        m.to_local = to_local
+
+    def _homogeneous(self, loader, props, m):
+        if props.has("sigma_a") or props.has("sigma_s"):
+            if props.has("sigma_t") or props.has("albedo"):
+                raise props.error("sigma_t" if props.has("sigma_t") else "albedo",
+                                  "give either sigma_t/albedo (Mitsuba) or sigma_a/sigma_s (pbrt-v4), not both")
+            m.form = AS
+            m.s1 = self._spectrum(loader, props, "sigma_a", 1.0)
+            m.s2 = self._spectrum(loader, props, "sigma_s", 1.0)
+        else:
+            m.s1 = self._spectrum(loader, props, "sigma_t", 1.0)
+            m.s2 = self._spectrum(loader, props, "albedo", 0.75, bounded=True)
+        m.scale = props.float("scale", 1.0, min=0.0)
+
+    def _heterogeneous(self, loader, props, m):
+        m.s1, m.g1 = self._volume(loader, props, "sigma_t", 1.0, m, "unbounded")
+        m.s2, m.g2 = self._volume(loader, props, "albedo", 0.75, m, "albedo")
+        m.scale = props.float("scale", 1.0, min=0.0)
+
+    def _bounds(self, props, m):
+        """pbrt-v4's p0/p1 grid bounds (default the unit cube)."""
+        p0 = props.vector3("p0", (0.0, 0.0, 0.0))
+        p1 = props.vector3("p1", (1.0, 1.0, 1.0))
+        if np.any(p1 <= p0):
+            raise props.error("p1", f"must exceed p0 in every coordinate, got p0={p0.tolist()} p1={p1.tolist()}")
+        to_world = props.transform("to_world") @ np.array(
+            [[p1[0] - p0[0], 0, 0, p0[0]], [0, p1[1] - p0[1], 0, p0[1]], [0, 0, p1[2] - p0[2], p0[2]], [0, 0, 0, 1]])
+        self._set_bounds(m, np.linalg.inv(to_world), props.path)
+
+    def _uniformgrid(self, loader, props, m):
+        m.form = AS
+        m.s1 = self._spectrum(loader, props, "sigma_a", 1.0)
+        m.s2 = self._spectrum(loader, props, "sigma_s", 1.0)
+        m.scale = props.float("scale", 1.0, min=0.0)
+        dens = as_grid(props.raw("density"), props.key("density")) if props.has("density") else None
+        if dens is None or dens.shape[3] != 1:
+            raise props.error("density", "expected a (nz, ny, nx) density grid")
+        m.g1 = m.g2 = self.grids.add(dens, "unbounded", props.key("density"))
+        self._bounds(props, m)
+
+    def _rgbgrid(self, loader, props, m):
+        m.form = AS
+        for k in ("sigma_a", "sigma_s"):
+            if not props.has(k):
+                raise props.error(k, "an rgbgrid needs sigma_a and sigma_s grids of shape (nz, ny, nx, 3)")
+        ga = as_grid(props.raw("sigma_a"), props.key("sigma_a"))
+        gs = as_grid(props.raw("sigma_s"), props.key("sigma_s"))
+        if ga.shape[:3] != gs.shape[:3]:
+            raise props.error("sigma_s", f"grid shape {gs.shape[:3]} differs from sigma_a's {ga.shape[:3]}")
+        m.g1, m.g2 = self.grids.add(ga, "unbounded"), self.grids.add(gs, "unbounded")
+        m.s1 = m.s2 = load_spectrum(loader, 1.0, props.path, emitter=False)
+        m.scale = props.float("scale", 1.0, min=0.0)
+        self._bounds(props, m)
+
+    def _emission(self, loader, props, m):
+        """pbrt-v4's ``Le`` (an illuminant spectrum, or an RGB grid for ``rgbgrid``) and
+        ``Lescale``; for uniformgrid the emission is scaled by the density grid."""
+        m.le_scale = props.float("Lescale", 1.0, min=0.0)
+        if not props.has("Le"):
+            return
+        v = props.raw("Le")
+        if props.type == "rgbgrid" and not isinstance(v, (dict, int, float)):
+            # RGB emission: unbounded per-voxel spectra times the illuminant (D65).
+            m.ge = self.grids.add(as_grid(v, props.key("Le")), "unbounded")
+            m.le = load_spectrum(loader, 1.0, props.key("Le"), emitter=True)
+            return
+        m.le = load_spectrum(loader, v, props.key("Le"), emitter=True)
+        if loader.textures.kind_of(m.le) != 0:
+            raise props.error("Le", "medium emission must be a constant spectrum")
+        if props.type == "uniformgrid":
+            m.ge = m.g1
+
+    @staticmethod
+    def _phase(props):
+        kids = [(k, c) for k, c in props.children() if c["type"] in PHASE_TYPES]
+        if props.has("g"):  # pbrt-v4: Henyey-Greenstein asymmetry on the medium
+            if kids:
+                raise props.error("g", "give either 'g' or a phase function, not both")
+            return HG, props.float("g", min=-1.0, max=1.0)
+        if not kids:
+            return HG, 0.0
+        if len(kids) > 1:
+            raise props.error(kids[1][0], "a medium takes at most one phase function")
+        k, _ = kids[0]
+        p = props.child(k)
+        props.mark(k)
+        out = PHASE_TYPES[p.type](p)
+        p.finish()
+        return out
+
+    # -- tables ----------------------------------------------------------------------
+    def build(self, textures) -> None:
+        self.textures = textures
+        ms = self.media
+        if not ms:
+            return
+        self.grids.build()
+        self.forms = {m.form for m in ms}
+        self.has_grid = any(m.to_local is not None for m in ms)
+        self.has_le = any(m.le is not None for m in ms)
+        self.phase_kinds = {m.phase[0] for m in ms}
+        u32 = lambda xs: mi.UInt32([int(x) for x in xs])  # noqa: E731
+        self.form = u32(m.form for m in ms)
+        self.s1 = u32(m.s1 for m in ms)
+        self.s2 = u32(m.s2 for m in ms)
+        self.g1 = u32(m.g1 for m in ms)
+        self.g2 = u32(m.g2 for m in ms)
+        self.scale = param_table([m.owner.params["scale"] for m in ms])
+        self.le = u32(m.le if m.le is not None else 0 for m in ms)
+        self.has_le_of = mi.Bool([m.le is not None for m in ms])
+        self.ge = u32(m.ge for m in ms)
+        self.le_scale = mi.Float([m.le_scale for m in ms])
+        self.phase_kind = u32(m.phase[0] for m in ms)
+        self.phase_g = mi.Float([float(np.clip(m.phase[1], -G_MAX, G_MAX)) for m in ms])
+        if self.has_grid:
+            self._build_majorants()
+
+    def _build_majorants(self):
+        """Per medium: world -> unit-cube rows and the majorant grid (two cell maxima
+        per cell: one per factor; homogeneous media have none)."""
+        ms = self.media
+        rows = np.zeros((3, len(ms), 4))
+        maj, offs = [], []
+        off = 0
+        for i, m in enumerate(ms):
+            offs.append(off)
+            if m.to_local is None:
+                rows[:, i] = np.eye(4)[:3]
+                continue
+            rows[:, i] = m.to_local[:3]
+            cells = []
+            for g in (m.g1, m.g2):
+                bound = self.grids.max_bound(g) if g != NO_GRID else np.ones((1, 1, 1))
+                cells.append(cell_maxima(bound, MAJORANT_RES).ravel())
+            maj.append(np.stack(cells, axis=1).ravel())
+            off += 2 * MAJORANT_RES ** 3
+        self.rows = [mi.Array4f(*(rows[r, :, k].tolist() for k in range(4))) for r in range(3)]
+        self.is_grid = mi.Bool([m.to_local is not None for m in ms])
+        self.maj = mi.Float(np.concatenate(maj).astype(np.float32))
+        self.maj_off = mi.UInt32(offs)
+
+    # -- kernels -------------------------------------------------------------------------
+    def to_local(self, m, p, active, vector=False):
+        """World point (or vector) -> the medium's unit-cube grid space."""
+        w = 0.0 if vector else 1.0
+        ph = mi.Array4f(p.x, p.y, p.z, w)
+        return mi.Vector3f(*(dr.dot(dr.gather(mi.Array4f, r, m, active), ph) for r in self.rows))
+
+    def _factors(self, m, wl, active):
+        """The constant spectra S1, S2 and the scale of medium ``m``."""
+        uv = mi.Point2f(0.0)
+        s1 = self.textures.eval(dr.gather(mi.UInt32, self.s1, m, active), uv, wl.lambda_, active)
+        s2 = self.textures.eval(dr.gather(mi.UInt32, self.s2, m, active), uv, wl.lambda_, active)
+        return s1, s2, dr.gather(mi.Float, self.scale, m, active)
+
+    def _combine(self, m, x, y, scale, active):
+        """(sigma_a, sigma_s) from the two factors in the medium's form."""
+        sa_as, ss_as = scale * x, scale * y
+        if self.forms == {AS}:
+            return sa_as, ss_as
+        st = scale * x
+        ss_ta = st * y
+        sa_ta = st - ss_ta
+        if self.forms == {TA}:
+            return sa_ta, ss_ta
+        is_as = dr.gather(mi.UInt32, self.form, m, active) == AS
+        return dr.select(is_as, sa_as, sa_ta), dr.select(is_as, ss_as, ss_ta)
+
+    def eval(self, m, p: mi.Point3f, wl, active) -> MediumProperties:
+        """sigma_a, sigma_s and Le of medium ``m`` (index) at world point ``p``."""
+        x, y, scale = self._factors(m, wl, active)
+        if self.has_grid:
+            grid = active & dr.gather(mi.Bool, self.is_grid, m, active)
+            pl = self.to_local(m, p, grid)
+            g1 = dr.gather(mi.UInt32, self.g1, m, grid)
+            g2 = dr.gather(mi.UInt32, self.g2, m, grid)
+            x = dr.select(grid & (g1 != NO_GRID), x * self.grids.lookup(g1, pl, wl.lambda_, grid & (g1 != NO_GRID)), x)
+            y = dr.select(grid & (g2 != NO_GRID), y * self.grids.lookup(g2, pl, wl.lambda_, grid & (g2 != NO_GRID)), y)
+        sa, ss = self._combine(m, x, y, scale, active)
+        Le = mi.Spectrum(0.0)
+        if self.has_le:
+            em = active & dr.gather(mi.Bool, self.has_le_of, m, active)
+            Le = self.textures.eval(dr.gather(mi.UInt32, self.le, m, em), mi.Point2f(0.0), wl.lambda_, em)
+            Le *= dr.gather(mi.Float, self.le_scale, m, em)
+            if self.has_grid:
+                ge = dr.gather(mi.UInt32, self.ge, m, em)
+                eg = em & (ge != NO_GRID)
+                Le = dr.select(eg, Le * self.grids.lookup(ge, self.to_local(m, p, eg), wl.lambda_, eg), Le)
+            Le = dr.select(em, Le, 0.0)
+        return MediumProperties(mi.Spectrum(sa), mi.Spectrum(ss), mi.Spectrum(Le))
+
+    def majorant(self, m, cell, wl, active):
+        """sigma_maj of medium ``m`` in majorant cell ``cell`` (ignored for homogeneous
+        media, whose majorant is sigma_t itself); detached: it only steers sampling."""
+        with dr.suspend_grad():
+            return self._majorant(m, cell, wl, active)
+
+    def _majorant(self, m, cell, wl, active):
+        x, y, scale = self._factors(m, wl, active)
+        if self.has_grid:
+            grid = active & dr.gather(mi.Bool, self.is_grid, m, active)
+            r = MAJORANT_RES
+            idx = dr.gather(mi.UInt32, self.maj_off, m, grid) + 2 * mi.UInt32((cell.z * r + cell.y) * r + cell.x)
+            x = dr.select(grid, x * dr.gather(mi.Float, self.maj, idx, grid), x)
+            y = dr.select(grid, y * dr.gather(mi.Float, self.maj, idx + 1, grid), y)
+        if self.forms == {TA}:
+            return scale * x
+        st_as = scale * (x + y)
+        if self.forms == {AS}:
+            return st_as
+        return dr.select(dr.gather(mi.UInt32, self.form, m, active) == AS, st_as, scale * x)
+
+    def phase_eval(self, m, wo, wi, active):
+        kind = dr.gather(mi.UInt32, self.phase_kind, m, active)
+        g = dr.gather(mi.Float, self.phase_g, m, active)
+        return phase_eval(kind, g, wo, wi, self.phase_kinds)
+
+    def phase_sample(self, m, wo, u, active):
+        kind = dr.gather(mi.UInt32, self.phase_kind, m, active)
+        g = dr.gather(mi.Float, self.phase_g, m, active)
+        return phase_sample(kind, g, wo, u, self.phase_kinds)
