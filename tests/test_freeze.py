@@ -68,7 +68,7 @@ def _optimise(case, frozen: bool, n=6):
 
 def _tables(case, scene):
     if case is _texture_case:
-        return np.array(scene.textures.T["b_texel"])
+        return np.array(scene.textures.tables.bitmaps.texel)
     return np.array(scene.bsdfs.families["roughdielectric"].eta)
 
 

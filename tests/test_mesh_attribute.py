@@ -9,7 +9,8 @@ import pytest
 import trimesh
 
 import pbr
-from pbr import meshattr, validate
+from pbr import validate
+from pbr.textures import meshattr
 from mitsuba_scenes import BATCHES, SPP, material_box
 
 N_GRID = 5

@@ -43,7 +43,7 @@ def scene_state(scene: Scene) -> list:
     map_tables(scene, keep)
     # Attribute dicts of the BSDF families whose tables an update re-binds (``eta``).
     refreshed = [vars(f) for f in scene.bsdfs.families.values() if hasattr(f, "refresh_params")]
-    return [arrays, scene.textures.T, refreshed, [owner.params for owner in scene.param_owners()],
+    return [arrays, scene.textures.tables, refreshed, [owner.params for owner in scene.param_owners()],
             scene.mi_scene]
 
 

@@ -23,8 +23,8 @@ import mitsuba as mi
 import numpy as np
 
 from . import dispatch
-from .meshattr import attach, file_attributes
 from .plugins.props import Props, SceneError
+from .textures.meshattr import attach, file_attributes
 
 # Parameters each shape type understands (beyond bsdf/emitter/id).
 SHAPE_PARAMS = {

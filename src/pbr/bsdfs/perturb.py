@@ -12,7 +12,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..plugins.props import SceneError
-from ..textures import load_spectrum
+from ..textures import Bitmap, load_spectrum
 
 NORMAL, BUMP = 1, 2
 
@@ -82,9 +82,9 @@ def parse(loader, props, bsdf_like):
         tex_key = texs[0]
     slot = load_spectrum(loader, props.raw(tex_key), props.key(tex_key), emitter=False, unbounded=True)
     tex = loader.textures.items[slot]
-    if type(tex).__name__ != "Bitmap":
+    if not isinstance(tex, Bitmap):
         raise props.error(tex_key, f"{props.type} needs a bitmap texture, got {type(tex).__name__}")
-    tex.needs_raw = True
+    loader.textures.mark_raw(slot)
     return kind, slot, scale, flip, shadow, bsdfs[0]
 
 

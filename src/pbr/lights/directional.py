@@ -24,8 +24,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .base import LIGHT_TYPES, LightType, LightSample, LeSample
-from .point import load_constant_emission, photometric, luminance, vec_table, gather3
+from .base import (LIGHT_TYPES, gather3, LeSample, LightSample, LightType, load_constant_emission, luminance,
+                   photometric, vec_table)
 
 
 def scene_sphere(scene):

@@ -27,9 +27,8 @@ import mitsuba as mi
 import numpy as np
 
 from ..image import read_image
-from .base import LIGHT_TYPES, LightSample
-from .point import (DeltaPositionLight, load_constant_emission, power_factor, light_frame, mat_rows, apply_rows,
-                    point_bounds, max_value, luminance)
+from .base import (LIGHT_TYPES, apply_rows, DeltaPositionLight, light_frame, LightSample, load_constant_emission,
+                   luminance, mat_rows, max_value, point_bounds, power_factor)
 
 EQUAL_AREA, EQUIRECT = 0, 1
 

@@ -71,9 +71,8 @@ import numpy as np
 from .. import spectrum as spec
 from ..image import read_image
 from ..plugins.params import ParamOwner, param_table
-from ..textures import load_spectrum, BITMAP, CHECKERBOARD, COMPOSITE, OP_SCALE, OP_CHECKER
-from .base import LIGHT_TYPES, LightType, LightSample, LeSample
-from .point import _Ref
+from ..textures import load_spectrum
+from .base import LIGHT_TYPES, LeSample, LightSample, LightType, ReferencePoint
 
 INV_4PI = 1.0 / (4.0 * math.pi)
 
@@ -103,19 +102,6 @@ def _uniform_sphere(u: mi.Point2f) -> mi.Vector3f:
     r = dr.safe_sqrt(1.0 - z * z)
     s, c = dr.sincos(dr.two_pi * u.y)
     return mi.Vector3f(r * c, r * s, z)
-
-
-def _spatially_varying(texs, slot: int) -> bool:
-    kind = texs.kind_of(slot)
-    if kind in (BITMAP, CHECKERBOARD):
-        return True
-    if kind == COMPOSITE:
-        t = texs.items[slot]
-        if t.op == OP_CHECKER:
-            return True
-        kids = (t.x, t.m) if t.op == OP_SCALE else (t.x, t.y, t.m)
-        return any(_spatially_varying(texs, k) for k in kids)
-    return False
 
 
 def _rotation(props, name="to_world") -> np.ndarray:
@@ -203,7 +189,7 @@ def _infinite_sample_Le(self, idx, u_pos, u_dir, wl, active) -> LeSample:
     the light, uniformly: ``pdf_pos = 1 / (pi r^2)``, ``pdf_dir`` = the density of the
     direction toward the light."""
     c = mi.Point3f(*[float(x) for x in self.center])
-    ls = self.sample_Li(idx, _Ref(c), u_dir, wl, active)
+    ls = self.sample_Li(idx, ReferencePoint(c), u_dir, wl, active)
     d = -ls.wi
     disk = mi.warp.square_to_uniform_disk_concentric(u_pos)
     fr = mi.Frame3f(d)
@@ -228,7 +214,7 @@ class ConstantLight(LightType):
 
     def add(self, loader, props, shape_index=None) -> int:
         slot = load_spectrum(loader, props.raw("radiance", 1.0), props.key("radiance"), emitter=True)
-        if _spatially_varying(loader.textures, slot):
+        if loader.textures.spatially_varying(slot):
             raise props.error("radiance", "a constant emitter needs a spatially constant radiance")
         props.finish()
         self.instances.append({"radiance": slot})

@@ -38,9 +38,8 @@ from .. import spectrum as spec
 from ..cameras import _x_fov
 from ..plugins.props import Props
 from ..textures import load_spectrum, Bitmap
-from .base import LIGHT_TYPES, LightSample
-from .point import (DeltaPositionLight, light_frame, mat_rows, apply_rows, vec_table, gather3, point_bounds,
-                    luminance, max_value)
+from .base import (LIGHT_TYPES, apply_rows, DeltaPositionLight, gather3, light_frame, LightSample, luminance,
+                   mat_rows, max_value, point_bounds, vec_table)
 
 
 def _image_luminance(textures, slot):

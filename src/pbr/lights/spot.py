@@ -20,9 +20,8 @@ import mitsuba as mi
 import numpy as np
 
 from ..textures import load_spectrum
-from .base import LIGHT_TYPES, LightSample, LeSample
-from .point import (DeltaPositionLight, load_constant_emission, power_factor, light_frame, spatially_varying,
-                    mat_rows, apply_rows, point_bounds, max_value, luminance, gather3)
+from .base import (LIGHT_TYPES, apply_rows, DeltaPositionLight, gather3, LeSample, light_frame, LightSample,
+                   load_constant_emission, luminance, mat_rows, max_value, point_bounds, power_factor)
 
 
 def spot_solid_angle(cutoff_rad: float, beam_rad: float) -> float:
@@ -41,7 +40,7 @@ class SpotLight(DeltaPositionLight):
         tex = None
         if props.has("texture"):
             tex = load_spectrum(loader, props.raw("texture"), props.key("texture"), emitter=False)
-            if not spatially_varying(loader.textures, tex):
+            if not loader.textures.spatially_varying(tex):
                 raise props.error("texture", "must vary spatially (e.g. a bitmap); use 'intensity' for a constant")
         cutoff = props.float("cutoff_angle", 20.0, min=1e-4, max=180.0)
         beam = props.float("beam_width", cutoff * 0.75, min=0.0)

@@ -31,7 +31,7 @@ from ..phase import HG, PHASE_TYPES, G_MAX, phase_eval, phase_sample
 from ..plugins.params import ParamOwner, param_table
 from ..plugins.props import Props, SceneError
 from ..plugins.registry import Registry
-from ..textures import load_spectrum
+from ..textures import CONSTANT, load_spectrum
 from .grid import GridTable, MAJORANT_RES, as_grid, cell_maxima, read_vol
 
 # Type name -> the MediumSet method that parses a medium of that type.
@@ -117,7 +117,7 @@ class MediumSet:
             if v < 0 or (bounded and v > 1):
                 raise SceneError(f"{path}: expected a value in [0, {'1' if bounded else 'inf'}), got {v}")
         slot = load_spectrum(loader, v, path, emitter=False, unbounded=unbounded)
-        if loader.textures.kind_of(slot) != 0:
+        if loader.textures.kind_of(slot) != CONSTANT:
             raise SceneError(f"{path}: a medium coefficient must be a constant spectrum (not a texture)")
         return slot
 
@@ -229,7 +229,7 @@ class MediumSet:
             m.le = load_spectrum(loader, 1.0, props.key("Le"), emitter=True)
             return
         m.le = load_spectrum(loader, v, props.key("Le"), emitter=True)
-        if loader.textures.kind_of(m.le) != 0:
+        if loader.textures.kind_of(m.le) != CONSTANT:
             raise props.error("Le", "medium emission must be a constant spectrum")
         if props.type == "uniformgrid":
             m.ge = m.g1

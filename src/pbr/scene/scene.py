@@ -6,9 +6,9 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .. import meshattr
 from ..geometry import Geometry
 from ..plugins.tables import own_table_memory
+from ..textures import meshattr
 
 
 class ShapeList:

@@ -33,8 +33,10 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import spectrum as spec
-from .plugins.props import SceneError
+from .. import spectrum as spec
+from ..plugins.props import SceneError
+from .kinds import MeshAttribute
+from .tables import MeshAttributeTable
 
 NONE = 0xFFFFFFFF
 # Postfix categories of grouped PLY properties: xyzw, rgba, 0123, 1234 (Mitsuba's ply.h).
@@ -43,15 +45,6 @@ _RESERVED = {"vertex": {"x", "y", "z", "nx", "ny", "nz", "u", "v"},
              "face": {"vertex_index", "vertex_indices"}}
 # Mesh buffers that mi.traverse lists beside the attributes.
 _BUILTIN = {"vertex_positions", "vertex_normals", "vertex_texcoords", "faces"}
-
-
-class MeshAttribute:
-    """A ``mesh_attribute`` texture: attribute ``name`` times ``scale``, upsampled in
-    ``form`` ('albedo' or 'unbounded')."""
-
-    def __init__(self, name: str, scale: float, form: str, key: str):
-        self.name, self.form, self.key = name, form, key
-        self.params = {"scale": mi.Float(scale)}
 
 
 class MeshData:
@@ -178,8 +171,8 @@ def attribute_channels(mesh) -> dict[str, int]:
 
 # -------------------------------------------------------------------- texture loading
 
-def load(textures, p, form: str) -> int:
-    """A ``mesh_attribute`` texture slot from its Props ``p``."""
+def load(p, form: str) -> MeshAttribute:
+    """A ``mesh_attribute`` texture from its Props ``p``."""
     name = p.string("name")
     if not name.startswith(("vertex_", "face_")):
         raise p.error("name", f"a mesh attribute name starts with 'vertex_' or 'face_', got {name!r}")
@@ -187,7 +180,7 @@ def load(textures, p, form: str) -> int:
     p.finish()
     if form == "illuminant":
         raise p.error(None, "mesh_attribute is supported in BSDF parameters, not (yet) in emitters")
-    return textures.add(MeshAttribute(name, scale, form, p.path))
+    return MeshAttribute(p.path, name, scale, form)
 
 
 def bind(textures, shapes, shape_bsdf, shape_ids, bsdf_textures) -> None:
@@ -224,22 +217,22 @@ def bind(textures, shapes, shape_bsdf, shape_ids, bsdf_textures) -> None:
         # Triangles and vertex positions of all meshes (for barycentric coordinates).
         pos = np.concatenate([d.positions for d in data])
         textures.mesh_geometry = {
-            "a_foff": mi.UInt32(np.cumsum([0] + [len(d.faces) for d in data])[:-1].astype(np.uint32)),
-            "a_poff": mi.UInt32(np.cumsum([0] + [len(d.positions) for d in data])[:-1].astype(np.uint32)),
-            "a_faces": mi.UInt32(np.concatenate([d.faces for d in data]).ravel()),
-            "a_pos": mi.Array3f(pos[:, 0], pos[:, 1], pos[:, 2])}
+            "foff": mi.UInt32(np.cumsum([0] + [len(d.faces) for d in data])[:-1].astype(np.uint32)),
+            "poff": mi.UInt32(np.cumsum([0] + [len(d.positions) for d in data])[:-1].astype(np.uint32)),
+            "faces": mi.UInt32(np.concatenate([d.faces for d in data]).ravel()),
+            "pos": mi.Array3f(pos[:, 0], pos[:, 1], pos[:, 2])}
 
 
 # ------------------------------------------------------------------------- tables
 
-def build_tables(textures, index, T: dict) -> None:
+def build_tables(textures, index) -> MeshAttributeTable | None:
     """Tables of the ``mesh_attribute`` textures: per (texture, mesh) record the offset of
     its upsampled rows (rebuilt from the parameters), and the meshes' triangles (from
-    :func:`bind`)."""
+    :func:`bind`); None without mesh attributes."""
     data, n_tex = textures.mesh_data, len(textures.mesh_attrs)
     textures.ma_vertex = textures.ma_face = False
     if not data:
-        return
+        return None
     n_mesh = len(data)
     key = np.full(max(d.registry_id for d in data) + 1, NONE, np.uint32)
     rec = np.full(n_tex * n_mesh, NONE, np.uint32)
@@ -259,11 +252,9 @@ def build_tables(textures, index, T: dict) -> None:
         idx = dr.arange(mi.UInt32, rows)
         dr.scatter(coeffs, c, idx + off)
         dr.scatter(scales, s * tex.params["scale"], idx + off)
-    T["a_coeffs"], T["a_scale"] = coeffs, scales
-    T["a_key"], T["a_rec"] = mi.UInt32(key), mi.UInt32(rec)
-    T["a_voff"], T["a_vertex"] = mi.UInt32(voff), mi.Bool(vertex)
     textures.ma_vertex, textures.ma_face = any(vertex), not all(vertex)
-    T.update(textures.mesh_geometry)
+    return MeshAttributeTable(coeffs=coeffs, scale=scales, key=mi.UInt32(key), rec=mi.UInt32(rec),
+                              voff=mi.UInt32(voff), vertex=mi.Bool(vertex), **textures.mesh_geometry)
 
 
 def _upsample(vals: mi.Float, rows: int, form: str):
@@ -297,29 +288,29 @@ def evaluate(textures, ai, si, lam, active) -> mi.Spectrum:
     0 where the hit shape does not carry it (or without a hit). The triangle lookup does
     not depend on the texture, so that the lookups of several textures at one hit are
     shared by the kernel (common subexpressions)."""
-    T = textures.T
+    T = textures.tables.mesh_attributes
     reg = dr.reinterpret_array(mi.UInt32, si.shape)
-    known = reg < dr.width(T["a_key"])
-    mesh = dr.gather(mi.UInt32, T["a_key"], reg, known)
+    known = reg < dr.width(T.key)
+    mesh = dr.gather(mi.UInt32, T.key, reg, known)
     on_mesh = known & (mesh != NONE)
-    rec = dr.gather(mi.UInt32, T["a_rec"], ai * len(textures.mesh_data) + mesh, active & on_mesh)
+    rec = dr.gather(mi.UInt32, T.rec, ai * len(textures.mesh_data) + mesh, active & on_mesh)
     ok = active & on_mesh & (rec != NONE)
-    off = dr.gather(mi.UInt32, T["a_voff"], rec, ok)
+    off = dr.gather(mi.UInt32, T.voff, rec, ok)
     rows, weights = [off + si.prim_index], [mi.Float(1.0)]
     if textures.ma_vertex:
-        first = dr.gather(mi.UInt32, T["a_foff"], mesh, on_mesh) + si.prim_index
-        base = dr.gather(mi.UInt32, T["a_poff"], mesh, on_mesh)
-        corner = [dr.gather(mi.UInt32, T["a_faces"], first * 3 + k, on_mesh) for k in range(3)]
-        p = [dr.gather(mi.Array3f, T["a_pos"], base + c, on_mesh) for c in corner]
+        first = dr.gather(mi.UInt32, T.foff, mesh, on_mesh) + si.prim_index
+        base = dr.gather(mi.UInt32, T.poff, mesh, on_mesh)
+        corner = [dr.gather(mi.UInt32, T.faces, first * 3 + k, on_mesh) for k in range(3)]
+        p = [dr.gather(mi.Array3f, T.pos, base + c, on_mesh) for c in corner]
         b = barycentric(mi.Array3f(si.p), *p)
         if textures.ma_face:   # per-face rows: the first "corner" with weight 1
-            vert = dr.gather(mi.Bool, T["a_vertex"], rec, ok)
+            vert = dr.gather(mi.Bool, T.vertex, rec, ok)
             rows = [dr.select(vert, off + corner[0], rows[0])] + [off + c for c in corner[1:]]
             weights = [dr.select(vert, b[0], 1.0), dr.select(vert, b[1], 0.0), dr.select(vert, b[2], 0.0)]
         else:
             rows, weights = [off + c for c in corner], list(b)
     result = mi.Spectrum(0.0)
     for row, w in zip(rows, weights):
-        c = dr.gather(mi.Array3f, T["a_coeffs"], row, ok & (w != 0))
-        result += w * spec.sigmoid_polynomial(c, lam) * dr.gather(mi.Float, T["a_scale"], row, ok & (w != 0))
+        c = dr.gather(mi.Array3f, T.coeffs, row, ok & (w != 0))
+        result += w * spec.sigmoid_polynomial(c, lam) * dr.gather(mi.Float, T.scale, row, ok & (w != 0))
     return dr.select(ok, result, 0.0)

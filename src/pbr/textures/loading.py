@@ -1,0 +1,211 @@
+"""Loading textures: a Mitsuba spectrum-valued parameter (a float or a texture/spectrum
+dict) -> a texture slot, by a table of one loading function per plugin type
+(:data:`TEXTURE_TYPES`).
+
+Constant spectra cover Mitsuba's ``rgb`` (albedo / unbounded / illuminant forms),
+``spectrum`` (a constant, ``wavelength:value`` pairs or a file), ``blackbody``, ``d65``,
+``uniform`` and plain floats; tabulated spectra are resampled at 1 nm, piecewise linear
+and zero outside their range (as Mitsuba's ``regular``/``irregular`` spectra). Emitters
+use the illuminant (D65) form for RGB and floats, as Mitsuba's spectral variants do.
+Children of combinators get key paths below their parent (``mat.reflectance.tex.data``,
+``mat.reflectance.amount.value``), as nested textures do in ``mi.traverse``.
+"""
+
+from __future__ import annotations
+
+import os
+
+import mitsuba as mi
+import numpy as np
+
+from .. import spectrum as spec
+from ..image import linear_to_srgb, read_image
+from ..plugins.props import Props, SceneError
+from ..plugins.registry import Registry
+from . import meshattr
+from .kinds import (BASE_ONE, BASE_SIGMOID, BASE_TABLE, CONSTANT, OP_CHECKER, OP_MIX, OP_SCALE, TAB_N, Bitmap,
+                    Checkerboard, Composite, ConstantSpectrum)
+
+# Type name -> loading function ``fn(loader, props, form, emitter, unbounded) -> slot``
+# (``mix`` is also a BSDF type: the scene loader tells them apart).
+TEXTURE_TYPES = Registry("texture")
+
+
+def load_spectrum(loader, value, path: str, emitter: bool, unbounded: bool = False) -> int:
+    """The texture slot of a spectrum-valued parameter ``value`` at key path ``path``: a
+    float, or a dict ``{'type': 'rgb'|'spectrum'|'blackbody'|'d65'|'uniform'|
+    'checkerboard'|'bitmap'|'scale'|'mix'|'mesh_attribute'|'ref', ...}`` as in Mitsuba
+    dicts. ``emitter``: the illuminant form; ``unbounded``: RGB values may exceed 1.
+    The texture keeps ``path`` as its key for :func:`pbr.traverse` (``red.reflectance``)."""
+    textures = loader.textures
+    if isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool):
+        v = float(value)
+        if emitter:
+            return textures.add(ConstantSpectrum(path, BASE_SIGMOID, "illuminant", mi.Color3f(v)))
+        return textures.add(ConstantSpectrum(path, BASE_ONE, value=mi.Float(v)))
+    if not isinstance(value, dict) or "type" not in value:
+        raise SceneError(f"{path}: expected a float or a texture/spectrum dict with a 'type', got {value!r}")
+    p = Props(value, path, loader)
+    if p.type == "ref":
+        obj = loader.resolve_ref(p.string("id"), path)
+        p.finish()
+        return load_spectrum(loader, obj, path, emitter, unbounded)
+    if p.type not in TEXTURE_TYPES:
+        raise SceneError(f"{path}: unsupported texture/spectrum type {p.type!r} (supported: "
+                         f"{TEXTURE_TYPES.supported()}, ref)")
+    form = "illuminant" if emitter else ("unbounded" if unbounded else "albedo")
+    return TEXTURE_TYPES[p.type](loader, p, form, emitter, unbounded)
+
+
+def add_tabulated(loader, wavelengths, values, path: str) -> int:
+    """A texture slot for a tabulated spectrum (piecewise linear between samples)."""
+    return loader.textures.add(ConstantSpectrum(path, BASE_TABLE, table=table_from_pairs(wavelengths, values, path)))
+
+
+def table_from_pairs(wl: np.ndarray, vals: np.ndarray, where: str) -> np.ndarray:
+    """(wavelength, value) samples -> the 1 nm table of a tabulated spectrum."""
+    wl = np.asarray(wl, np.float64)
+    vals = np.asarray(vals, np.float64)
+    if wl.size < 2 or np.any(np.diff(wl) <= 0):
+        raise SceneError(f"{where}: wavelengths must be at least two strictly increasing values")
+    grid = spec.LAMBDA_MIN + np.arange(TAB_N)
+    # Zero outside the given range, as Mitsuba's irregular/regular spectra.
+    return np.where((grid >= wl[0]) & (grid <= wl[-1]), np.interp(grid, wl, vals), 0.0)
+
+
+# ---------------------------------------------------------------- constant spectra
+
+@TEXTURE_TYPES.register("rgb")
+def _rgb(loader, p, form, emitter, unbounded):
+    rgb = p.vector3("value")
+    if form == "albedo" and (np.any(rgb < 0) or np.any(rgb > 1)):
+        raise p.error("value", f"RGB reflectance must lie in [0, 1], got {rgb.tolist()}")
+    p.finish()
+    return loader.textures.add(ConstantSpectrum(p.path, BASE_SIGMOID, form, mi.Color3f(*map(float, rgb))))
+
+
+@TEXTURE_TYPES.register("spectrum")
+def _spectrum(loader, p, form, emitter, unbounded):
+    textures, path = loader.textures, p.path
+    if p.has("filename"):
+        wl, vals = spec.read_spd(loader.resolve_path(p.string("filename"), p.key("filename")))
+        p.finish()
+        return textures.add(ConstantSpectrum(path, BASE_TABLE, table=table_from_pairs(wl, vals, path)))
+    v = p.raw("value")
+    p.finish()
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return textures.add(ConstantSpectrum(path, BASE_ONE, value=mi.Float(float(v))))
+    if isinstance(v, str):
+        try:
+            pairs = [tuple(float(x) for x in item.split(":")) for item in v.replace(",", " ").split()]
+        except ValueError:
+            raise SceneError(f"{path}.value: expected 'wavelength:value' pairs, got {v!r}") from None
+        v = pairs
+    try:
+        arr = np.asarray(v, dtype=np.float64)
+    except (TypeError, ValueError):
+        arr = np.empty(0)
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise SceneError(f"{path}.value: expected a float or a list of (wavelength, value) pairs, got {v!r}")
+    return textures.add(ConstantSpectrum(path, BASE_TABLE, table=table_from_pairs(arr[:, 0], arr[:, 1], path)))
+
+
+@TEXTURE_TYPES.register("blackbody")
+def _blackbody(loader, p, form, emitter, unbounded):
+    temp = p.float("temperature", min=1.0)
+    lo = p.float("wavelength_min", spec.LAMBDA_MIN)
+    hi = p.float("wavelength_max", spec.LAMBDA_MAX)
+    p.finish()
+    grid = spec.LAMBDA_MIN + np.arange(TAB_N)
+    table = np.where((grid >= lo) & (grid <= hi), spec.blackbody(grid, temp), 0.0)
+    return loader.textures.add(ConstantSpectrum(p.path, BASE_TABLE, table=table))
+
+
+@TEXTURE_TYPES.register("d65")
+def _d65(loader, p, form, emitter, unbounded):
+    scale = p.float("scale", 1.0)
+    if p.has("color"):
+        rgb = p.vector3("color")
+        p.finish()
+        return loader.textures.add(ConstantSpectrum(p.path, BASE_SIGMOID, "illuminant", mi.Color3f(*map(float, rgb)),
+                                                    scale=scale))
+    p.finish()
+    return loader.textures.add(ConstantSpectrum(p.path, BASE_ONE, "illuminant", scale=scale))
+
+
+@TEXTURE_TYPES.register("uniform")
+def _uniform(loader, p, form, emitter, unbounded):
+    v = p.float("value")
+    p.finish()
+    return loader.textures.add(ConstantSpectrum(p.path, BASE_ONE, value=mi.Float(v)))
+
+
+# -------------------------------------------------------------- spatially varying
+
+@TEXTURE_TYPES.register("checkerboard")
+def _checkerboard(loader, p, form, emitter, unbounded):
+    textures = loader.textures
+    c0 = load_spectrum(loader, p.raw("color0", 0.4), p.key("color0"), emitter, unbounded)
+    c1 = load_spectrum(loader, p.raw("color1", 0.2), p.key("color1"), emitter, unbounded)
+    to_uv = p.transform("to_uv")
+    p.finish()
+    if textures.kind_of(c0) == CONSTANT and textures.kind_of(c1) == CONSTANT:
+        return textures.add(Checkerboard(p.path, c0, c1, to_uv))
+    return textures.add(Composite(p.path, OP_CHECKER, c0, c1, to_uv=to_uv))   # textured colours: a combinator
+
+
+@TEXTURE_TYPES.register("scale")
+def _scale(loader, p, form, emitter, unbounded):
+    # pbrt-v4's ``scale``: tex * scale. The factor is a plain (unbounded, never
+    # illuminant) spectrum, so that an emitter's scaled radiance carries D65 once.
+    x = load_spectrum(loader, p.raw("tex", 1.0), p.key("tex"), emitter, unbounded)
+    m = load_spectrum(loader, p.raw("scale", 1.0), p.key("scale"), emitter=False, unbounded=True)
+    p.finish()
+    return loader.textures.add(Composite(p.path, OP_SCALE, x, m=m))
+
+
+@TEXTURE_TYPES.register("mix")
+def _mix(loader, p, form, emitter, unbounded):
+    # pbrt-v4's ``mix``: (1 - amount) tex1 + amount tex2 (defaults 0, 1 and 0.5).
+    x = load_spectrum(loader, p.raw("tex1", 0.0), p.key("tex1"), emitter, unbounded)
+    y = load_spectrum(loader, p.raw("tex2", 1.0), p.key("tex2"), emitter, unbounded)
+    m = load_spectrum(loader, p.raw("amount", 0.5), p.key("amount"), emitter=False)
+    p.finish()
+    return loader.textures.add(Composite(p.path, OP_MIX, x, y, m))
+
+
+@TEXTURE_TYPES.register("bitmap")
+def _bitmap(loader, p, form, emitter, unbounded):
+    filter_type = p.string("filter_type", "bilinear", choices=("bilinear", "nearest"))
+    wrap_mode = p.string("wrap_mode", "repeat", choices=("repeat", "mirror", "clamp"))
+    raw = p.bool("raw", False)
+    to_uv = p.transform("to_uv")
+    p.mark("format")
+    if p.has("data"):
+        rgb = np.asarray(p.raw("data"), dtype=np.float32)
+        if rgb.ndim == 2:
+            rgb = rgb[..., None]
+        if rgb.ndim != 3:
+            raise p.error("data", f"expected an (H, W, C) array, got shape {rgb.shape}")
+    else:
+        fname = loader.resolve_path(p.string("filename"), p.key("filename"))
+        try:
+            rgb = read_image(fname)
+        except Exception as e:  # unreadable file
+            raise p.error("filename", f"cannot read image {fname!r}: {e}") from None
+    p.finish()
+    if rgb.ndim == 2:
+        rgb = rgb[..., None]
+    rgb = rgb[..., :3] if rgb.shape[2] >= 3 else rgb[..., :1]
+    if raw and not p.has("data") and os.path.splitext(fname)[1].lower() in (".png", ".jpg", ".jpeg"):
+        # read_image decodes 8-bit sRGB; raw data (normal/bump maps) keeps the stored values.
+        rgb = linear_to_srgb(rgb).astype(np.float32)
+    raw_values = np.array(rgb, dtype=np.float32)
+    if form == "albedo":
+        rgb = np.clip(rgb, 0.0, 1.0)
+    return loader.textures.add(Bitmap(p.path, rgb, filter_type, wrap_mode, to_uv, form, raw_values))
+
+
+@TEXTURE_TYPES.register("mesh_attribute")
+def _mesh_attribute(loader, p, form, emitter, unbounded):
+    return loader.textures.add(meshattr.load(p, form))
