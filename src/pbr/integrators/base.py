@@ -140,6 +140,7 @@ class SamplingIntegrator:
 
     def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0):
         """Propagate the image adjoint ``grad_img`` (H, W, 3) to the scene parameters."""
+        self._require_differentiable()
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
         pixel_w = self._pixel_weights(scene, sensor, seed, spp)
         g = grad_img.array if isinstance(grad_img, mi.TensorXf) else mi.Float(np.asarray(grad_img, np.float32).ravel())
@@ -158,6 +159,7 @@ class SamplingIntegrator:
 
     def render_forward(self, scene, sensor=0, seed=0, spp=0):
         """Forward-mode derivative of the image w.r.t. the gradients set on parameters."""
+        self._require_differentiable()
         def radiance_derivative(rng, ray, wl, inside):
             state = _snapshot(rng)
             L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
@@ -165,6 +167,12 @@ class SamplingIntegrator:
             rng.state, rng.inc = _snapshot(state)
             return self.sample(scene, rng, ray, wl, FORWARD, None, L, inside)[0]
         return self._film(scene, sensor, seed, spp, radiance_derivative, progress=False)
+
+    def _require_differentiable(self) -> None:
+        if not self.differentiable:
+            names = sorted(n for n, c in INTEGRATORS.items() if c.differentiable)
+            raise NotImplementedError(f"{self.name}: derivatives are not supported (primal renders only); "
+                                      f"differentiable integrators: {', '.join(names)}")
 
     def _pixel_weights(self, scene, sensor, seed, spp):
         """Sum of filter weights per pixel (depends only on the random numbers)."""
@@ -176,6 +184,22 @@ class SamplingIntegrator:
                 s = _pixel_sums([weight], w * h, per_pass)
                 sum_w = s if sum_w is None else sum_w + s
         return dr.maximum(sum_w, 1e-30)
+
+
+def path_state(ray, active, L=None):
+    """The loop state every path tracer starts from: copies of the camera ray and the
+    active mask (symbolic loops update their state in place), the radiance ``L`` (0, or
+    the primal radiance a PRB replay starts from), throughput ``beta`` = 1, ``depth`` = 0
+    and ``valid`` (whether the path hit anything) = False."""
+    L = mi.Spectrum(0.0) if L is None else mi.Spectrum(L)
+    return mi.Ray3f(ray), mi.Bool(active), L, mi.Spectrum(1.0), mi.UInt32(0), mi.Bool(False)
+
+
+def mis_state(ray):
+    """The previous vertex that MIS weights of emitter hits refer to, at the start of a
+    path: (``prev_p`` the camera ray's origin, ``prev_n`` 0, ``prev_pdf`` 1, ``prev_delta``
+    True: emitters seen directly are weighted 1)."""
+    return mi.Point3f(ray.o), mi.Normal3f(0.0), mi.Float(1.0), mi.Bool(True)
 
 
 def emitted_mis(scene, light, si, d, wl, on_light, escaped, prev_p, prev_n, prev_pdf, prev_delta):

@@ -28,6 +28,7 @@ from .base import INTEGRATORS, SamplingIntegrator, PRIMAL, BACKWARD, emitted_mis
 class PathIntegrator(SamplingIntegrator):
     name = "path"
     default_max_depth = -1
+    differentiable = True
 
     def __init__(self, props):
         super().__init__(props)

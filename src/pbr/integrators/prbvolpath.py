@@ -32,12 +32,12 @@ import mitsuba as mi
 
 from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
-from ..media import majorant
-from ..sampling import power_heuristic
 from ..plugins.props import SceneError
+from ..sampling import power_heuristic
 from ..spectrum import first_only
-from .base import INTEGRATORS, PRIMAL, BACKWARD, emitted_mis, forward_derivative
-from .volpath import SHADOW_EPSILON, VolPathIntegrator, _MediumAware
+from . import volume
+from .base import INTEGRATORS, PRIMAL, BACKWARD, emitted_mis, forward_derivative, mis_state, path_state
+from .volpath import _MediumAware
 
 
 def _ratio(w):
@@ -49,6 +49,7 @@ def _ratio(w):
 @INTEGRATORS.register("prbvolpath")
 class PRBVolPathIntegrator(_MediumAware):
     name = "prbvolpath"
+    differentiable = True
 
     def __init__(self, props):
         super().__init__(props)
@@ -94,61 +95,88 @@ class PRBVolPathIntegrator(_MediumAware):
             return dL_fwd
         return dL_fwd + forward_derivative(Lo)
 
-    @dr.syntax
-    def _transmittance(self, scene, rng, ray, p_light, medium, wl, mode, dL, adj, dL_fwd, active):
-        """Transmittance from ``ray.o`` to ``p_light`` through media and null surfaces:
-        exact in homogeneous media, ratio tracking in grids. In the adjoint modes, the
-        derivative of ``adj * T`` (adj: the detached contribution this T multiplies) is
-        propagated factor by factor (``dL``: the adjoint radiance). Returns (T, dL_fwd)."""
-        geo, media = scene.geometry, scene.media
+    # -- collisions: the path's free flight and a shadow ray's ratio tracking -------------
+    def _real_or_null(self, state, c, rng, media, homog, mode, dL, L):
+        """A tentative collision of the path: real (scatter, weight sigma_s / (sigma_maj
+        P)) with probability P = mean(sigma_t / sigma_maj), null otherwise; the weight of
+        the step is recomputed attached and its derivative propagated (adjoint modes)."""
+        beta, p_sc, scattered, n_null, dL_fwd = state
         primal = mode == PRIMAL
-        T = mi.Spectrum(1.0)
-        going = mi.Bool(active)
-        med = mi.UInt32(medium)
-        ray = mi.Ray3f(ray)
-        n_null = mi.UInt32(0)
-        has_media = len(media) > 0
-        while dr.hint(going, label="prbvolpath_shadow"):
-            remaining = dr.norm(p_light - ray.o)
-            si, shape = geo.intersect(ray, going)
-            hit = going & si.is_valid() & (si.t < remaining * (1.0 - SHADOW_EPSILON))
-            t_end = dr.select(hit, si.t, remaining)
-            if has_media:
-                in_m = going & (med > 0)
-                m = med - 1
-                grid = self._grid_lanes(media, m, in_m)
-                homog = in_m & ~grid
-                with dr.resume_grad(when=not primal):
-                    st = media.eval(m, ray.o, wl, homog)
-                    w = dr.exp(-(st.sigma_a + st.sigma_s) * t_end)
-                    f = _ratio(w)
-                if not primal:
-                    dL_fwd = self._propagate(mode, dL, homog, adj, f, dL_fwd)
-                T[homog] = T * dr.detach(w)
-                it = majorant.start(media, m, ray, t_end, grid)
-                T_acc = mi.Spectrum(1.0)
-                inner = mi.Bool(grid)
-                while dr.hint(inner, label="prbvolpath_ratio_tracking"):
-                    coll, T_maj, sigma_maj, done = majorant.step(media, it, m, wl, rng.next_float32(), inner,
-                                                                 factor=self.majorant_factor)
-                    T_acc *= T_maj
-                    with dr.resume_grad(when=not primal):
-                        mp = media.eval(m, ray.o + ray.d * it.t, wl, coll)
-                        pdf = T_acc[0] * sigma_maj[0]
-                        w = T_acc * (sigma_maj - mp.sigma_a - mp.sigma_s) * dr.select(pdf > 0, dr.rcp(pdf), 0.0)
-                        f = _ratio(w)
-                    if not primal:
-                        dL_fwd = self._propagate(mode, dL, coll, adj, f, dL_fwd)
-                    T[coll] = T * dr.detach(w)
-                    T_acc[coll] = mi.Spectrum(1.0)
-                    n_null = dr.select(coll, n_null + 1, n_null)
-                    T[coll & (n_null >= self.max_null)] = mi.Spectrum(0.0)
-                    inner &= ~done & (dr.max(T) > 0)
-                t0 = T_acc[0]
-                T[grid] = T * dr.select(t0 > 0, T_acc * dr.rcp(t0), 0.0)
-            passable, med, ray = VolPathIntegrator._cross_null(scene, shape, si, ray, p_light, med, hit)
-            T[hit & ~passable] = mi.Spectrum(0.0)
-            going &= passable & (dr.max(T) > 0)
+        coll, T_maj, sigma_maj = c.coll, c.T_maj, c.sigma_maj
+        with dr.resume_grad(when=not primal):
+            mp = media.eval(c.m, c.p, c.wl, c.going)
+            st = mp.sigma_a + mp.sigma_s
+            st_d = dr.detach(st)
+            P = dr.clip(dr.mean(st_d * dr.select(sigma_maj > 0, dr.rcp(sigma_maj), 0.0)), 0.0, 1.0)
+            u_ev = rng.next_float32()
+            real = coll & (u_ev < P)
+            null = coll & ~real
+            # Homogeneous: the majorant is sigma_t itself, attached.
+            maj = dr.select(homog, st, sigma_maj)
+            T_att = dr.select(homog, dr.exp(-st * (c.t - c.t_prev)), T_maj)
+            pdf = T_maj[0] * dr.select(coll, sigma_maj[0], 1.0)
+            ev = dr.select(real, mp.sigma_s * dr.rcp(P), dr.select(null, (maj - st) * dr.rcp(1.0 - P), 1.0))
+            w = T_att * ev * dr.select(pdf > 0, dr.rcp(pdf), 0.0)
+            f = _ratio(w)
+        if not primal:
+            dL_fwd = self._propagate(mode, dL, c.going, L, f, dL_fwd)
+        beta[c.going] = beta * dr.detach(w)
+        p_sc[real] = c.p
+        scattered |= real
+        n_null = dr.select(null, n_null + 1, n_null)
+        capped = null & (n_null >= self.max_null)
+        beta[capped] = mi.Spectrum(0.0)
+        return (beta, p_sc, scattered, n_null, dL_fwd), real | capped | ~(dr.max(beta) > 0)
+
+    def _ratio_tracking(self, state, c, rng, media, mode, dL, adj):
+        """A tentative collision of a shadow ray in a grid medium: the transmittance is
+        weighted by the null fraction, recomputed attached (adjoint modes: its derivative
+        times ``adj`` is propagated)."""
+        T, n_null, dL_fwd, T_acc = state
+        primal = mode == PRIMAL
+        coll, sigma_maj = c.coll, c.sigma_maj
+        T_acc *= c.T_maj
+        with dr.resume_grad(when=not primal):
+            mp = media.eval(c.m, c.p, c.wl, coll)
+            pdf = T_acc[0] * sigma_maj[0]
+            w = T_acc * (sigma_maj - mp.sigma_a - mp.sigma_s) * dr.select(pdf > 0, dr.rcp(pdf), 0.0)
+            f = _ratio(w)
+        if not primal:
+            dL_fwd = self._propagate(mode, dL, coll, adj, f, dL_fwd)
+        T[coll] = T * dr.detach(w)
+        T_acc[coll] = mi.Spectrum(1.0)
+        n_null = dr.select(coll, n_null + 1, n_null)
+        T[coll & (n_null >= self.max_null)] = mi.Spectrum(0.0)
+        return (T, n_null, dL_fwd, T_acc), ~(dr.max(T) > 0)
+
+    def _shadow_segment(self, state, ray, medium, t_end, in_m, media, wl, rng, mode, dL, adj):
+        """Transmittance through one medium segment of a shadow ray (see
+        :func:`.volume.transmittance`): exact in homogeneous media, ratio tracking in
+        grids. In the adjoint modes, the derivative of ``adj * T`` (adj: the detached
+        contribution this T multiplies) is propagated factor by factor (``dL``: the
+        adjoint radiance). State: (T, null collisions, forward derivative)."""
+        T, n_null, dL_fwd = state
+        primal = mode == PRIMAL
+        m = medium - 1
+        grid = self._grid_lanes(media, m, in_m)
+        homog = in_m & ~grid
+        with dr.resume_grad(when=not primal):
+            st = media.eval(m, ray.o, wl, homog)
+            w = dr.exp(-(st.sigma_a + st.sigma_s) * t_end)
+            f = _ratio(w)
+        if not primal:
+            dL_fwd = self._propagate(mode, dL, homog, adj, f, dL_fwd)
+        T[homog] = T * dr.detach(w)
+        T, n_null, dL_fwd, T_acc = volume.free_flight(
+            media, rng, ray, medium, t_end, wl, grid, (T, n_null, dL_fwd, mi.Spectrum(1.0)), self._ratio_tracking,
+            (media, mode, dL, adj), factor=self.majorant_factor)
+        T[grid] = T * volume.hero_ratio(T_acc)
+        return T, n_null, dL_fwd
+
+    def _transmittance(self, scene, rng, sray, p_light, medium, wl, mode, dL, adj, dL_fwd, active):
+        """(transmittance from ``sray.o`` to ``p_light``, forward derivative)."""
+        T, _, dL_fwd = volume.transmittance(scene, sray, p_light, medium, active, (mi.Spectrum(1.0), mi.UInt32(0), dL_fwd),
+                                            self._shadow_segment, (scene.media, wl, rng, mode, dL, adj))
         return T, dL_fwd
 
     # -- the estimator --------------------------------------------------------------------
@@ -159,21 +187,13 @@ class PRBVolPathIntegrator(_MediumAware):
         has_media = len(media) > 0
         max_depth = self.max_depth if self.max_depth >= 0 else 0xFFFFFFFF
 
-        L = mi.Spectrum(0.0) if primal else mi.Spectrum(L_in)
+        ray, active, L, beta, depth, valid = path_state(ray, active, None if primal else L_in)
+        prev_p, prev_n, prev_pdf, prev_delta = mis_state(ray)
         dL_fwd = mi.Spectrum(0.0)
         dL = mi.Spectrum(0.0) if dL is None else mi.Spectrum(dL)
-        beta = mi.Spectrum(1.0)
         eta = mi.Float(1.0)
-        depth = mi.UInt32(0)
         medium = mi.UInt32(self._medium)
-        prev_p = mi.Point3f(ray.o)
-        prev_n = mi.Normal3f(0.0)
-        prev_pdf = mi.Float(1.0)
-        prev_delta = mi.Bool(True)
-        valid = mi.Bool(False)
         terminated = mi.Bool(False)
-        active = mi.Bool(active)
-        ray = mi.Ray3f(ray)
         n_null = mi.UInt32(0)
 
         while dr.hint(active, label="prbvolpath"):
@@ -186,41 +206,10 @@ class PRBVolPathIntegrator(_MediumAware):
             p_sc = mi.Point3f(0.0)
             if has_media:
                 in_m = active & (medium > 0)
-                m = medium - 1
-                homog = in_m & ~self._grid_lanes(media, m, in_m)
-                it = majorant.start(media, m, ray, t_hit, in_m)
-                going = mi.Bool(in_m)
-                while dr.hint(going, label="prbvolpath_delta_tracking"):
-                    t_prev = mi.Float(it.t)
-                    coll, T_maj, sigma_maj, done = majorant.step(media, it, m, wl, rng.next_float32(), going,
-                                                                 factor=self.majorant_factor)
-                    p = ray.o + ray.d * it.t
-                    st_d = mi.Spectrum(0.0)
-                    with dr.resume_grad(when=not primal):
-                        mp = media.eval(m, p, wl, going)
-                        st = mp.sigma_a + mp.sigma_s
-                        st_d = dr.detach(st)
-                        P = dr.clip(dr.mean(st_d * dr.select(sigma_maj > 0, dr.rcp(sigma_maj), 0.0)), 0.0, 1.0)
-                        u_ev = rng.next_float32()
-                        real = coll & (u_ev < P)
-                        null = coll & ~real
-                        # Homogeneous: the majorant is sigma_t itself, attached.
-                        maj = dr.select(homog, st, sigma_maj)
-                        T_att = dr.select(homog, dr.exp(-st * (it.t - t_prev)), T_maj)
-                        pdf = T_maj[0] * dr.select(coll, sigma_maj[0], 1.0)
-                        ev = dr.select(real, mp.sigma_s * dr.rcp(P),
-                                       dr.select(null, (maj - st) * dr.rcp(1.0 - P), 1.0))
-                        w = T_att * ev * dr.select(pdf > 0, dr.rcp(pdf), 0.0)
-                        f = _ratio(w)
-                    if not primal:
-                        dL_fwd = self._propagate(mode, dL, going, L, f, dL_fwd)
-                    beta[going] = beta * dr.detach(w)
-                    p_sc[real] = p
-                    scattered |= real
-                    n_null = dr.select(null, n_null + 1, n_null)
-                    capped = null & (n_null >= self.max_null)
-                    beta[capped] = mi.Spectrum(0.0)
-                    going &= ~done & ~real & ~capped & (dr.max(beta) > 0)
+                homog = in_m & ~self._grid_lanes(media, medium - 1, in_m)
+                beta, p_sc, scattered, n_null, dL_fwd = volume.free_flight(
+                    media, rng, ray, medium, t_hit, wl, in_m, (beta, p_sc, scattered, n_null, dL_fwd),
+                    self._real_or_null, (media, homog, mode, dL, L), factor=self.majorant_factor)
                 n_null[active] = 0
 
             # -- surface reached (or the ray escaped): emission, MIS-weighted ---------------
@@ -241,22 +230,14 @@ class PRBVolPathIntegrator(_MediumAware):
                 L = L - dr.detach(Le)
                 dL_fwd = self._propagate(mode, dL, True, Le, 1.0, dL_fwd)
 
-            bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, surf)
-            skip |= surf & bsdfs.is_null(bsdf_id, surf)
-            real = surf & ~skip
-            valid |= real | scattered
-            at_vertex = real | scattered
-            go_on = at_vertex & (depth + 1 < max_depth)
-            sc = go_on & scattered
-            rs = go_on & real
+            bsdf_id, skip, real, at_vertex, go_on, sc, rs = volume.classify(
+                scene, shape, surf, scattered, skip, depth, max_depth)
+            valid |= at_vertex
 
             # -- next-event estimation ---------------------------------------------------------
             ctx = ShadingContext(si, wl, tex)
             nee = (rs & bsdfs.smooth(bsdf_id, rs)) | sc
-            ref = dr.zeros(mi.SurfaceInteraction3f)
-            ref.p = dr.select(sc, p_sc, si.p)
-            ref.n = dr.select(sc, mi.Normal3f(0.0), si.n)
-            ref.time = si.time
+            ref = volume.nee_reference(si, sc, p_sc)
             u_light = rng.next_float32()
             u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
             u1 = rng.next_float32()
@@ -266,20 +247,13 @@ class PRBVolPathIntegrator(_MediumAware):
                 wo_em = si.to_local(ls.wi)
                 f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs)
                 if has_media:
-                    f_ph = media.phase_eval(medium - 1, -ray.d, ls.wi, sc)
-                    f_em = dr.select(sc, mi.Spectrum(f_ph), f_em)
-                    pdf_em = dr.select(sc, f_ph, pdf_em)
+                    f_em, pdf_em = volume.phase_nee(media, medium, ray, ls.wi, sc, f_em, pdf_em)
                 w_em = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf, dr.detach(pdf_em)))
                 Ld_unocc = dr.select(nee & (ls.pdf > 0), beta * f_em * ls.L * (w_em / ls.pdf), 0.0)
                 f_sampled = bs.weight * bs.pdf     # delta lobes and stochastic BSDFs (see prb)
             replay_sample = bs.delta | bsdfs.stochastic(bsdf_id, rs)
             bs = dr.detach(bs)
-            sray = si.spawn_ray(ls.wi)
-            sray.o[sc] = p_sc
-            sray = VolPathIntegrator._aim(sray, ls.p)
-            s_med = medium
-            if has_media:
-                s_med = VolPathIntegrator._enter(scene, shape, si, ls.wi, medium, nee & rs)
+            sray, s_med = volume.shadow_ray(scene, shape, si, ls, sc, p_sc, medium, nee & rs)
             nee &= ls.pdf > 0
             state = (type(rng.state)(rng.state), type(rng.inc)(rng.inc))
             T_sh, _ = self._transmittance(scene, rng, sray, ls.p, s_med, wl, PRIMAL, dL, dL, dL_fwd, nee)
@@ -294,16 +268,7 @@ class PRBVolPathIntegrator(_MediumAware):
                 _, dL_fwd = self._transmittance(scene, rng2, sray, ls.p, s_med, wl, mode, dL, Ld, dL_fwd, nee)
 
             # -- continue: BSDF or phase function sampling ----------------------------------------
-            wi_next = si.to_world(bs.wo)
-            pdf_next = mi.Float(bs.pdf)
-            w_next = mi.Spectrum(bs.weight)
-            delta_next = mi.Bool(bs.delta)
-            if has_media:
-                wph, pph = media.phase_sample(medium - 1, -ray.d, mi.Point2f(rng.next_float32(), rng.next_float32()), sc)
-                wi_next = dr.select(sc, wph, wi_next)
-                pdf_next = dr.select(sc, pph, pdf_next)
-                w_next = dr.select(sc, mi.Spectrum(1.0), w_next)
-                delta_next = delta_next & ~sc
+            wi_next, pdf_next, w_next, delta_next = volume.sample_direction(media, medium, ray, si, bs, sc, rng)
             cont = go_on & (pdf_next > 0)
             if not primal:
                 with dr.resume_grad():
@@ -327,12 +292,7 @@ class PRBVolPathIntegrator(_MediumAware):
             prev_n[cont] = ref.n
             prev_pdf[cont] = pdf_next
             prev_delta[cont] = delta_next
-            new_ray = si.spawn_ray(wi_next)
-            new_ray.o[sc] = p_sc
-            if has_media:
-                medium = VolPathIntegrator._enter(scene, shape, si, wi_next, medium, cont & rs)
-                medium = VolPathIntegrator._enter(scene, shape, si, ray.d, medium, skip)
-            ray = dr.select(cont, new_ray, dr.select(skip, si.spawn_ray(ray.d), ray))
+            ray, medium = volume.next_ray(scene, shape, si, ray, medium, wi_next, p_sc, sc, cont, rs, skip)
             depth[at_vertex] = depth + 1
 
             # Russian roulette (detached survival probability).

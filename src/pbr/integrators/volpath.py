@@ -30,18 +30,9 @@ import mitsuba as mi
 
 from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
-from ..media import majorant
 from ..spectrum import first_only
-from .base import INTEGRATORS, SamplingIntegrator, PRIMAL
-
-SHADOW_EPSILON = 1e-4
-
-
-def _hero_ratio(T_maj):
-    """T_maj / T_maj[0]: the weight of a segment passed without a collision, sampled
-    with the hero wavelength's probability T_maj[0] (0 where that is 0)."""
-    t0 = T_maj[0]
-    return dr.select(t0 > 0, T_maj * dr.rcp(t0), 0.0)
+from . import volume
+from .base import INTEGRATORS, SamplingIntegrator, mis_state, path_state
 
 
 class _MediumAware(SamplingIntegrator):
@@ -77,48 +68,12 @@ class VolPathIntegrator(_MediumAware):
                           f"({self.max_null}) and were terminated (biased)", RuntimeWarning, stacklevel=2)
         return img
 
-    def render_backward(self, *a, **k):
-        raise NotImplementedError("volpath: gradients through participating media are not implemented yet")
-
-    render_forward = render_backward
-
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
-        if mode != PRIMAL:
-            self.render_backward()
         if self.max_depth == 0:
             return mi.Spectrum(0.0), mi.Bool(False)
         if not hasattr(self, "_capped"):
             self._capped = mi.UInt32(0)
         return self._sample(scene, rng, ray, wl, active)
-
-    # -- helpers ----------------------------------------------------------------------
-    @staticmethod
-    def _enter(scene, shape, si, d, medium, active):
-        """The medium after crossing surface ``si`` of ``shape`` along world direction ``d``."""
-        trans = active & dr.gather(mi.Bool, scene.shape_transition, shape, active)
-        inside = dr.gather(mi.UInt32, scene.shape_interior, shape, trans)
-        outside = dr.gather(mi.UInt32, scene.shape_exterior, shape, trans)
-        return dr.select(trans, dr.select(dr.dot(d, si.n) > 0, outside, inside), medium)
-
-    @staticmethod
-    def _cross_null(scene, shape, si, ray, p_light, medium, hit):
-        """A shadow ray toward ``p_light`` meets surface ``si``: (lanes that pass it,
-        being ``null`` surfaces, the medium beyond, the ray continuing behind it)."""
-        bid = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
-        passable = hit & scene.bsdfs.is_null(bid, hit)
-        medium = VolPathIntegrator._enter(scene, shape, si, ray.d, medium, passable)
-        nxt = VolPathIntegrator._aim(si.spawn_ray(dr.normalize(p_light - si.p)), p_light)
-        return passable, medium, dr.select(passable, nxt, ray)
-
-    @staticmethod
-    def _aim(ray, p_light):
-        """``ray`` re-aimed from its origin at ``p_light``. A spawned ray's origin is
-        offset along the surface normal; keeping the direction taken from the unshifted
-        point makes a shadow ray meet the light's own surface short of ``p_light``
-        (which then counts as an occluder: up to half the direct light was lost with the
-        light 0.1 above a floor), or drift past it after crossing null surfaces."""
-        ray.d = dr.normalize(p_light - ray.o)
-        return ray
 
     def _count_null(self, n_null, null):
         """Count the null collisions ``null`` of each path; (new count, lanes that reach
@@ -128,58 +83,84 @@ class VolPathIntegrator(_MediumAware):
         dr.scatter_reduce(dr.ReduceOp.Add, self._capped, mi.UInt32(1), mi.UInt32(0), capped)
         return n_null, capped
 
-    @dr.syntax
-    def _transmittance(self, scene, rng, ray, p_light, medium, wl, active):
-        """Ratio-tracking transmittance from ``ray.o`` to ``p_light`` through media and
-        null surfaces: (T_ray, r_u, r_l) with pbrt-v4's rescaled probabilities."""
-        geo, media = scene.geometry, scene.media
-        T_ray = mi.Spectrum(1.0)
-        r_u = mi.Spectrum(1.0)
-        r_l = mi.Spectrum(1.0)
-        going = mi.Bool(active)
-        med = mi.UInt32(medium)
-        ray = mi.Ray3f(ray)
-        n_null = mi.UInt32(0)
-        has_media = len(media) > 0
-        while dr.hint(going, label="volpath_shadow"):
-            remaining = dr.norm(p_light - ray.o)
-            si, shape = geo.intersect(ray, going)
-            hit = going & si.is_valid() & (si.t < remaining * (1.0 - SHADOW_EPSILON))
-            t_end = dr.select(hit, si.t, remaining)
-            if has_media:
-                in_m = going & (med > 0)
-                m = med - 1
-                it = majorant.start(media, m, ray, t_end, in_m)
-                T_acc = mi.Spectrum(1.0)
-                inner = mi.Bool(in_m)
-                while dr.hint(inner, label="volpath_ratio_tracking"):
-                    coll, T_maj, sigma_maj, done = majorant.step(media, it, m, wl, rng.next_float32(), inner)
-                    T_acc *= T_maj
-                    mp = media.eval(m, ray.o + ray.d * it.t, wl, coll)
-                    sigma_n = dr.maximum(sigma_maj - mp.sigma_a - mp.sigma_s, 0.0)
-                    pdf = T_acc[0] * sigma_maj[0]
-                    inv = dr.select(pdf > 0, dr.rcp(pdf), 0.0)
-                    T_ray[coll] = T_ray * T_acc * sigma_n * inv
-                    r_l[coll] = r_l * T_acc * sigma_maj * inv
-                    r_u[coll] = r_u * T_acc * sigma_n * inv
-                    T_acc[coll] = mi.Spectrum(1.0)
-                    # Russian roulette on small transmittance (pbrt-v4).
-                    tr = T_ray * dr.rcp(dr.mean(r_l + r_u))
-                    small = coll & (dr.max(tr) < 0.05)
-                    kill = small & (rng.next_float32() < 0.75)
-                    T_ray[kill] = mi.Spectrum(0.0)
-                    T_ray[small & ~kill] = T_ray * 4.0
-                    n_null, capped = self._count_null(n_null, coll)
-                    T_ray[capped] = mi.Spectrum(0.0)
-                    inner &= ~done & (dr.max(T_ray) > 0)
-                f = _hero_ratio(T_acc)
-                T_ray[in_m] = T_ray * f
-                r_l[in_m] = r_l * f
-                r_u[in_m] = r_u * f
-            passable, med, ray = self._cross_null(scene, shape, si, ray, p_light, med, hit)
-            T_ray[hit & ~passable] = mi.Spectrum(0.0)
-            going &= passable & (dr.max(T_ray) > 0)
-        return T_ray, r_u, r_l
+    # -- collisions: delta tracking (paths) and ratio tracking (shadow rays) -----------------
+    def _delta_tracking(self, state, c, rng, media, depth, max_depth):
+        """A tentative collision of the path: medium emission, then absorption, real
+        scattering or a null collision, chosen with the hero wavelength's probabilities;
+        every wavelength keeps its rescaled path probabilities (r_u, r_l)."""
+        L, beta, r_u, r_l, T_acc, p_sc, scattered, absorbed, n_null = state
+        coll, sigma_maj = c.coll, c.sigma_maj
+        T_acc *= c.T_maj
+        mp = media.eval(c.m, c.p, c.wl, coll)
+        s0 = sigma_maj[0]
+        if media.has_le:
+            # Medium emission, estimated at every collision (pbrt-v4).
+            pdf_e = s0 * T_acc[0]
+            em = coll & (depth < max_depth) & (pdf_e > 0)
+            r_e = r_u * sigma_maj * T_acc * dr.rcp(pdf_e)
+            L[em] = L + beta * T_acc * dr.rcp(pdf_e) * mp.sigma_a * mp.Le * dr.rcp(dr.mean(r_e))
+        u_ev = rng.next_float32()
+        p_abs = mp.sigma_a[0] * dr.rcp(s0)
+        p_sca = mp.sigma_s[0] * dr.rcp(s0)
+        is_abs = coll & (u_ev < p_abs)
+        is_sca = coll & ~is_abs & (u_ev < p_abs + p_sca)
+        is_null = coll & ~is_abs & ~is_sca
+        # Real scattering: beta and r_u by T sigma_s / pdf.
+        pdf_s = T_acc[0] * mp.sigma_s[0]
+        w_s = T_acc * mp.sigma_s * dr.select(pdf_s > 0, dr.rcp(pdf_s), 0.0)
+        beta[is_sca] = beta * w_s
+        r_u[is_sca] = r_u * w_s
+        p_sc[is_sca] = c.p
+        # Null scattering: continue, reweighting every wavelength.
+        sigma_n = dr.maximum(sigma_maj - mp.sigma_a - mp.sigma_s, 0.0)
+        pdf_n = T_acc[0] * sigma_n[0]
+        inv_n = dr.select(pdf_n > 0, dr.rcp(pdf_n), 0.0)
+        beta[is_null] = beta * T_acc * sigma_n * inv_n
+        r_u[is_null] = r_u * T_acc * sigma_n * inv_n
+        r_l[is_null] = r_l * T_acc * sigma_maj * inv_n
+        T_acc[coll] = mi.Spectrum(1.0)
+        n_null, capped = self._count_null(n_null, is_null)
+        absorbed |= is_abs | capped
+        scattered |= is_sca
+        stop = is_abs | is_sca | capped | ~((dr.max(beta) > 0) & (dr.max(r_u) > 0))
+        return (L, beta, r_u, r_l, T_acc, p_sc, scattered, absorbed, n_null), stop
+
+    def _ratio_tracking(self, state, c, rng, media):
+        """A tentative collision of a shadow ray: weight every wavelength by the null
+        fraction (ratio tracking), with pbrt-v4's Russian roulette on small
+        transmittance."""
+        T_ray, r_u, r_l, n_null, T_acc = state
+        coll, sigma_maj = c.coll, c.sigma_maj
+        T_acc *= c.T_maj
+        mp = media.eval(c.m, c.p, c.wl, coll)
+        sigma_n = dr.maximum(sigma_maj - mp.sigma_a - mp.sigma_s, 0.0)
+        pdf = T_acc[0] * sigma_maj[0]
+        inv = dr.select(pdf > 0, dr.rcp(pdf), 0.0)
+        T_ray[coll] = T_ray * T_acc * sigma_n * inv
+        r_l[coll] = r_l * T_acc * sigma_maj * inv
+        r_u[coll] = r_u * T_acc * sigma_n * inv
+        T_acc[coll] = mi.Spectrum(1.0)
+        # Russian roulette on small transmittance (pbrt-v4).
+        tr = T_ray * dr.rcp(dr.mean(r_l + r_u))
+        small = coll & (dr.max(tr) < 0.05)
+        kill = small & (rng.next_float32() < 0.75)
+        T_ray[kill] = mi.Spectrum(0.0)
+        T_ray[small & ~kill] = T_ray * 4.0
+        n_null, capped = self._count_null(n_null, coll)
+        T_ray[capped] = mi.Spectrum(0.0)
+        return (T_ray, r_u, r_l, n_null, T_acc), ~(dr.max(T_ray) > 0)
+
+    def _shadow_segment(self, state, ray, medium, t_end, in_m, media, rng, wl):
+        """Ratio tracking through one medium segment of a shadow ray (see
+        :func:`.volume.transmittance`); state (T_ray, r_u, r_l, null collisions)."""
+        T_ray, r_u, r_l, n_null, T_acc = volume.free_flight(
+            media, rng, ray, medium, t_end, wl, in_m, tuple(state) + (mi.Spectrum(1.0),), self._ratio_tracking,
+            (media,))
+        f = volume.hero_ratio(T_acc)
+        T_ray[in_m] = T_ray * f
+        r_l[in_m] = r_l * f
+        r_u[in_m] = r_u * f
+        return T_ray, r_u, r_l, n_null
 
     # -- the estimator --------------------------------------------------------------------
     @dr.syntax
@@ -188,20 +169,13 @@ class VolPathIntegrator(_MediumAware):
         has_media = len(media) > 0
         max_depth = self.max_depth if self.max_depth >= 0 else 0xFFFFFFFF
 
-        L = mi.Spectrum(0.0)
-        beta = mi.Spectrum(1.0)
+        ray, active, L, beta, depth, valid = path_state(ray, active)
+        prev_p, prev_n, prev_pdf, prev_delta = mis_state(ray)
         r_u = mi.Spectrum(1.0)
         r_l = mi.Spectrum(1.0)
         eta = mi.Float(1.0)
-        depth = mi.UInt32(0)
         medium = mi.UInt32(self._medium)
-        prev_p = mi.Point3f(ray.o)
-        prev_n = mi.Normal3f(0.0)
-        prev_delta = mi.Bool(True)
-        valid = mi.Bool(False)
         terminated = mi.Bool(False)
-        active = mi.Bool(active)
-        ray = mi.Ray3f(ray)
         n_null = mi.UInt32(0)
 
         while dr.hint(active, label="volpath"):
@@ -215,48 +189,12 @@ class VolPathIntegrator(_MediumAware):
             p_sc = mi.Point3f(0.0)
             if has_media:
                 in_m = active & (medium > 0)
-                m = medium - 1
-                it = majorant.start(media, m, ray, t_hit, in_m)
-                T_acc = mi.Spectrum(1.0)
-                going = mi.Bool(in_m)
-                while dr.hint(going, label="volpath_delta_tracking"):
-                    coll, T_maj, sigma_maj, done = majorant.step(media, it, m, wl, rng.next_float32(), going)
-                    T_acc *= T_maj
-                    p = ray.o + ray.d * it.t
-                    mp = media.eval(m, p, wl, coll)
-                    s0 = sigma_maj[0]
-                    if media.has_le:
-                        # Medium emission, estimated at every collision (pbrt-v4).
-                        pdf_e = s0 * T_acc[0]
-                        em = coll & (depth < max_depth) & (pdf_e > 0)
-                        r_e = r_u * sigma_maj * T_acc * dr.rcp(pdf_e)
-                        L[em] = L + beta * T_acc * dr.rcp(pdf_e) * mp.sigma_a * mp.Le * dr.rcp(dr.mean(r_e))
-                    u_ev = rng.next_float32()
-                    p_abs = mp.sigma_a[0] * dr.rcp(s0)
-                    p_sca = mp.sigma_s[0] * dr.rcp(s0)
-                    is_abs = coll & (u_ev < p_abs)
-                    is_sca = coll & ~is_abs & (u_ev < p_abs + p_sca)
-                    is_null = coll & ~is_abs & ~is_sca
-                    # Real scattering: beta and r_u by T sigma_s / pdf.
-                    pdf_s = T_acc[0] * mp.sigma_s[0]
-                    w_s = T_acc * mp.sigma_s * dr.select(pdf_s > 0, dr.rcp(pdf_s), 0.0)
-                    beta[is_sca] = beta * w_s
-                    r_u[is_sca] = r_u * w_s
-                    p_sc[is_sca] = p
-                    # Null scattering: continue, reweighting every wavelength.
-                    sigma_n = dr.maximum(sigma_maj - mp.sigma_a - mp.sigma_s, 0.0)
-                    pdf_n = T_acc[0] * sigma_n[0]
-                    inv_n = dr.select(pdf_n > 0, dr.rcp(pdf_n), 0.0)
-                    beta[is_null] = beta * T_acc * sigma_n * inv_n
-                    r_u[is_null] = r_u * T_acc * sigma_n * inv_n
-                    r_l[is_null] = r_l * T_acc * sigma_maj * inv_n
-                    T_acc[coll] = mi.Spectrum(1.0)
-                    n_null, capped = self._count_null(n_null, is_null)
-                    absorbed |= is_abs | capped
-                    scattered |= is_sca
-                    going &= ~done & ~is_abs & ~is_sca & ~capped & (dr.max(beta) > 0) & (dr.max(r_u) > 0)
+                L, beta, r_u, r_l, T_acc, p_sc, scattered, absorbed, n_null = volume.free_flight(
+                    media, rng, ray, medium, t_hit, wl, in_m,
+                    (L, beta, r_u, r_l, mi.Spectrum(1.0), p_sc, scattered, absorbed, n_null),
+                    self._delta_tracking, (media, depth, max_depth))
                 through = in_m & ~scattered & ~absorbed
-                f = _hero_ratio(T_acc)
+                f = volume.hero_ratio(T_acc)
                 beta[through] = beta * f
                 r_u[through] = r_u * f
                 r_l[through] = r_l * f
@@ -281,24 +219,15 @@ class VolPathIntegrator(_MediumAware):
                     d_inf = dr.select(prev_delta, dr.mean(r_u), dr.mean(r_u + r_l * pdf_inf))
                     L[escaped] = L + beta * Le_inf * dr.rcp(d_inf)
 
-            bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, surf)
-            skip |= surf & bsdfs.is_null(bsdf_id, surf)
-            real = surf & ~skip
-            valid |= real | scattered
-            # Depth: a real scattering event (medium or surface) is one more vertex.
-            at_vertex = real | scattered
-            go_on = at_vertex & (depth + 1 < max_depth)
-            sc = go_on & scattered
-            rs = go_on & real
+            bsdf_id, skip, real, at_vertex, go_on, sc, rs = volume.classify(
+                scene, shape, surf, scattered, skip, depth, max_depth)
+            valid |= at_vertex
 
             # -- next-event estimation from the vertex (surface or medium point) ----------
             ctx = ShadingContext(si, wl, tex)
             smooth = rs & bsdfs.smooth(bsdf_id, rs)
             nee = smooth | sc
-            ref = dr.zeros(mi.SurfaceInteraction3f)
-            ref.p = dr.select(sc, p_sc, si.p)
-            ref.n = dr.select(sc, mi.Normal3f(0.0), si.n)
-            ref.time = si.time
+            ref = volume.nee_reference(si, sc, p_sc)
             u_light = rng.next_float32()
             u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
             ls = lights.sample_Li(ref, u_light, u_pos, wl, nee)
@@ -308,33 +237,18 @@ class VolPathIntegrator(_MediumAware):
             u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
             f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs)
             if has_media:
-                wo_m = -ray.d
-                f_ph = media.phase_eval(medium - 1, wo_m, ls.wi, sc)
-                f_em = dr.select(sc, mi.Spectrum(f_ph), f_em)
-                pdf_em = dr.select(sc, f_ph, pdf_em)
-            sray = si.spawn_ray(ls.wi)
-            sray.o[sc] = p_sc
-            sray = self._aim(sray, ls.p)
-            s_med = medium
-            if has_media:
-                s_med = self._enter(scene, shape, si, ls.wi, medium, nee & rs)
-            T_ray, tr_u, tr_l = self._transmittance(scene, rng, sray, ls.p, s_med, wl, nee)
+                f_em, pdf_em = volume.phase_nee(media, medium, ray, ls.wi, sc, f_em, pdf_em)
+            sray, s_med = volume.shadow_ray(scene, shape, si, ls, sc, p_sc, medium, nee & rs)
+            T_ray, tr_u, tr_l, n_shadow = volume.transmittance(
+                scene, sray, ls.p, s_med, nee, (mi.Spectrum(1.0), mi.Spectrum(1.0), mi.Spectrum(1.0), mi.UInt32(0)),
+                self._shadow_segment, (media, rng, wl))
             rl_nee = r_u * ls.pdf * tr_l
             ru_nee = r_u * pdf_em * tr_u
             d_nee = dr.select(ls.delta, dr.mean(rl_nee), dr.mean(rl_nee + ru_nee))
             L[nee] = L + beta * f_em * T_ray * ls.L * dr.rcp(d_nee)
 
             # -- continue: sample the BSDF or the phase function -------------------------
-            wi_next = si.to_world(bs.wo)
-            pdf_next = mi.Float(bs.pdf)
-            w_next = mi.Spectrum(bs.weight)
-            delta_next = mi.Bool(bs.delta)
-            if has_media:
-                wph, pph = media.phase_sample(medium - 1, -ray.d, mi.Point2f(rng.next_float32(), rng.next_float32()), sc)
-                wi_next = dr.select(sc, wph, wi_next)
-                pdf_next = dr.select(sc, pph, pdf_next)
-                w_next = dr.select(sc, mi.Spectrum(1.0), w_next)
-                delta_next = delta_next & ~sc
+            wi_next, pdf_next, w_next, delta_next = volume.sample_direction(media, medium, ray, si, bs, sc, rng)
             cont = go_on & (pdf_next > 0)
             if bsdfs.dispersive:
                 term = rs & bs.terminate & ~terminated
@@ -347,12 +261,7 @@ class VolPathIntegrator(_MediumAware):
             prev_p[cont] = ref.p
             prev_n[cont] = ref.n
             prev_delta[cont] = delta_next
-            new_ray = si.spawn_ray(wi_next)
-            new_ray.o[sc] = p_sc
-            if has_media:
-                medium = self._enter(scene, shape, si, wi_next, medium, cont & rs)
-                medium = self._enter(scene, shape, si, ray.d, medium, skip)
-            ray = dr.select(cont, new_ray, dr.select(skip, si.spawn_ray(ray.d), ray))
+            ray, medium = volume.next_ray(scene, shape, si, ray, medium, wi_next, p_sc, sc, cont, rs, skip)
             depth[at_vertex] = depth + 1
 
             # Russian roulette on the MIS-weighted throughput (detached probability).
@@ -382,9 +291,26 @@ class SimpleVolPathIntegrator(_MediumAware):
         self.light_sampler = "uniform"
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
-        if mode != PRIMAL:
-            raise NotImplementedError("simplevolpath: no gradients (use volpath)")
         return self._sample(scene, rng, ray, wl, active)
+
+    @staticmethod
+    def _delta_tracking(state, c, rng, media, depth, max_depth):
+        """A tentative collision, first wavelength only: emission, then absorption or
+        real scattering with probabilities sigma_a / sigma_maj and sigma_s / sigma_maj."""
+        L, beta, p_sc, scattered, absorbed = state
+        coll = c.coll
+        mp = media.eval(c.m, c.p, c.wl, coll)
+        s0 = c.sigma_maj[0]
+        if media.has_le:
+            L[coll & (depth < max_depth)] = L + beta * mp.sigma_a[0] * mp.Le[0] * dr.rcp(s0)
+        u = rng.next_float32()
+        p_abs = mp.sigma_a[0] * dr.rcp(s0)
+        is_abs = coll & (u < p_abs)
+        is_sca = coll & ~is_abs & (u < p_abs + mp.sigma_s[0] * dr.rcp(s0))
+        p_sc[is_sca] = c.p
+        absorbed |= is_abs
+        scattered |= is_sca
+        return (L, beta, p_sc, scattered, absorbed), is_abs | is_sca
 
     @dr.syntax
     def _sample(self, scene, rng, ray, wl, active):
@@ -405,25 +331,9 @@ class SimpleVolPathIntegrator(_MediumAware):
             absorbed = mi.Bool(False)
             p_sc = mi.Point3f(0.0)
             if has_media:
-                in_m = active & (medium > 0)
-                m = medium - 1
-                it = majorant.start(media, m, ray, dr.select(hit, si.t, dr.inf), in_m)
-                going = mi.Bool(in_m)
-                while dr.hint(going, label="simplevolpath_tracking"):
-                    coll, _, sigma_maj, done = majorant.step(media, it, m, wl, rng.next_float32(), going)
-                    p = ray.o + ray.d * it.t
-                    mp = media.eval(m, p, wl, coll)
-                    s0 = sigma_maj[0]
-                    if media.has_le:
-                        L[coll & (depth < max_depth)] = L + beta * mp.sigma_a[0] * mp.Le[0] * dr.rcp(s0)
-                    u = rng.next_float32()
-                    p_abs = mp.sigma_a[0] * dr.rcp(s0)
-                    is_abs = coll & (u < p_abs)
-                    is_sca = coll & ~is_abs & (u < p_abs + mp.sigma_s[0] * dr.rcp(s0))
-                    p_sc[is_sca] = p
-                    absorbed |= is_abs
-                    scattered |= is_sca
-                    going &= ~done & ~is_abs & ~is_sca
+                L, beta, p_sc, scattered, absorbed = volume.free_flight(
+                    media, rng, ray, medium, dr.select(hit, si.t, dr.inf), wl, active & (medium > 0),
+                    (L, beta, p_sc, scattered, absorbed), self._delta_tracking, (media, depth, max_depth))
             surf = active & ~scattered & ~absorbed & hit
             light = lights.light_of_hit(scene, shape, si, surf)
             on = surf & (light > 0)
@@ -432,32 +342,16 @@ class SimpleVolPathIntegrator(_MediumAware):
                 esc = active & ~scattered & ~absorbed & ~hit
                 for Le_inf, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), esc):
                     L[esc] = L + beta * Le_inf[0]
-            bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, surf)
-            skip = surf & bsdfs.is_null(bsdf_id, surf)
-            real = surf & ~skip
-            valid |= real | scattered
-            go_on = (real | scattered) & (depth + 1 < max_depth)
+            bsdf_id, skip, real, at_vertex, go_on, sc, rs = volume.classify(
+                scene, shape, surf, scattered, mi.Bool(False), depth, max_depth)
+            valid |= at_vertex
             ctx = ShadingContext(si, wl, tex)
-            bs = bsdfs.sample(bsdf_id, ctx, rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32()),
-                              go_on & real)
-            wi = si.to_world(bs.wo)
-            w = bs.weight[0]
-            pdf = mi.Float(bs.pdf)
-            if has_media:
-                wph, pph = media.phase_sample(medium - 1, -ray.d, mi.Point2f(rng.next_float32(), rng.next_float32()),
-                                              go_on & scattered)
-                wi = dr.select(scattered, wph, wi)
-                w = dr.select(scattered, 1.0, w)
-                pdf = dr.select(scattered, pph, pdf)
+            bs = bsdfs.sample(bsdf_id, ctx, rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32()), rs)
+            wi, pdf, weight, delta = volume.sample_direction(media, medium, ray, si, bs, sc, rng)
             cont = go_on & (pdf > 0)
-            beta[cont] = beta * w
-            new_ray = si.spawn_ray(wi)
-            new_ray.o[scattered] = p_sc
-            if has_media:
-                medium = VolPathIntegrator._enter(scene, shape, si, wi, medium, cont & real)
-                medium = VolPathIntegrator._enter(scene, shape, si, ray.d, medium, skip)
-            ray = dr.select(cont, new_ray, dr.select(skip, si.spawn_ray(ray.d), ray))
-            depth[real | scattered] = depth + 1
+            beta[cont] = beta * weight[0]
+            ray, medium = volume.next_ray(scene, shape, si, ray, medium, wi, p_sc, sc, cont, rs, skip)
+            depth[at_vertex] = depth + 1
             active = skip | (cont & (beta > 0))
         # Only the first wavelength was traced: it stands for all four.
         return first_only(mi.Spectrum(L)), valid
