@@ -125,13 +125,13 @@ def main(argv=None):
                                                  hide_emitters=not a.show_emitters))
         load_t[kind] = time.perf_counter() - t
     n_lights = len(scenes["bvh"].lights.local_of)
-    bvh = scenes["bvh"].lights.sampler.bvh
+    bvh = scenes["bvh"].integrator.light_sampler.bvh
     print(f"scene: {a.lights} rectangles + icosphere of {20 * 4 ** a.subdiv} triangles = {n_lights} lights; "
           f"{a.res}x{a.res}, max_depth {a.max_depth}, hide_emitters {not a.show_emitters}; "
           f"BVH: {bvh.n_nodes} nodes, depth {bvh.max_depth}")
     from pbr.lights.bvh import BVHLightSampler
     t = time.perf_counter()
-    BVHLightSampler(scenes["bvh"].lights.sampler.table)
+    BVHLightSampler(scenes["bvh"].integrator.light_sampler.table)
     t_build = time.perf_counter() - t
     print("scene load time (s): " + ", ".join(f"{k} {v:.2f}" for k, v in load_t.items())
           + f" (the first includes one-time warm-up); light BVH build {t_build:.2f} s")

@@ -34,7 +34,7 @@ class OneBSDF:
         si.n = mi.Vector3f(0, 0, 1)
         wl = SampledWavelengths(mi.Spectrum(*[mi.Float(l) for l in self.lam]) + dr.zeros(mi.Spectrum, n),
                                 mi.Spectrum(1.0 / 470.0))
-        return ShadingContext(si, wl, self.loader.textures)
+        return ShadingContext(si, wl)
 
     def eval_pdf(self, wi, wo):
         n = dr.width(wo)

@@ -94,3 +94,25 @@ def test_scene_without_lights_renders_black():
     del d["light"]["emitter"]
     img = np.asarray(pbr.render(pbr.load_dict(d)))
     assert img.shape == (8, 8, 3) and np.all(img == 0)
+
+
+def test_render_with_another_integrator_uses_its_light_sampler():
+    """``render(scene, integrator=X)`` samples lights with X's ``light_sampler``: on a
+    scene loaded with path/uniform, X = path/power gives the power-sampled scene's image
+    sample for sample, not the uniform one's (which it used to: the light sampler was
+    built with the scene, from the scene's integrator)."""
+    from pbr.integrators import INTEGRATORS
+    from pbr.plugins.props import Props
+
+    def scene(kind):
+        d = pbr.cornell_box(16, 4)
+        d["integrator"] = {"type": "path", "max_depth": 3, "light_sampler": kind}
+        d["dim"] = {"type": "point", "position": [0.5, 0.5, 0.5], "intensity": 0.05}
+        return pbr.load_dict(d)
+
+    uniform, power = scene("uniform"), scene("power")
+    x = INTEGRATORS["path"](Props({"type": "path", "max_depth": 3, "light_sampler": "power"}, "scene.integrator"))
+    img = np.asarray(pbr.render(uniform, integrator=x, seed=1))
+    assert np.array_equal(img, np.asarray(pbr.render(power, seed=1)))
+    assert not np.array_equal(img, np.asarray(pbr.render(uniform, seed=1)))
+    assert uniform.integrator.light_sampler.uniform and not x.light_sampler.uniform

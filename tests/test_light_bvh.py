@@ -290,7 +290,7 @@ def test_emissive_mesh_is_one_light_per_triangle(tmp_path):
     assert sl[ids.index("light")] == 1
     assert sl[ids.index("ico")] == 2 and sl[ids.index("cubelight")] == 2 + len(mesh.faces)
     # Power of a mesh's lights: pi * area * radiance per triangle.
-    p = lights.sampler
+    p = scene.integrator.light_sampler
     assert isinstance(p, BVHLightSampler)
     tri_phi = p.table.phi[1:1 + len(mesh.faces)]
     np.testing.assert_allclose(tri_phi.sum(), np.pi * mesh.area * 2.0, rtol=1e-3)
@@ -439,7 +439,13 @@ def test_bvh_render_biased_sampler_fails():
     """The same comparison detects a sampler whose pmf disagrees with its samples."""
     scene = pbr.load_dict(many_lights_scene("bvh"))
     ref = pbr.load_dict(many_lights_scene("uniform"))
-    scene.lights.sampler = Biased(scene.lights.sampler, 1.3)
+    integ, prepare = scene.integrator, scene.integrator.prepare
+
+    def biased(scene, sensor=0):    # the integrator's own sampler, wrapped at every render
+        prepare(scene, sensor)
+        integ.light_sampler = Biased(integ.light_sampler, 1.3)
+
+    integ.prepare = biased
     fa = lambda seed=0, spp=0: np.asarray(pbr.render(scene, seed=seed, spp=spp))  # noqa: E731
     fb = lambda seed=0, spp=0: np.asarray(pbr.render(ref, seed=seed, spp=spp))  # noqa: E731
     res = validate.compare_renders(fa, fb, spp=512, batches=BATCHES, seed_a=3, seed_b=4)
@@ -461,7 +467,7 @@ def test_extreme_lights_stay_finite(kind):
     img = np.asarray(pbr.render(scene, spp=16, seed=1))
     assert np.all(np.isfinite(img)) and img.mean() > 0     # (spectral noise may leave sRGB slightly < 0)
     n = len(scene.lights.local_of)
-    pmf = np.array(scene.lights.sampler.pmf(mi.UInt32(np.arange(n, dtype=np.uint32)), mi.Point3f(0.5, 0.0, 0.5),
+    pmf = np.array(scene.integrator.light_sampler.pmf(mi.UInt32(np.arange(n, dtype=np.uint32)), mi.Point3f(0.5, 0.0, 0.5),
                                              mi.Normal3f(0, 1, 0)))
     # (the BVH may find no light where a node's bounds face the point but none of its
     # children's do: then it chooses nothing, as pbrt-v4 does)

@@ -66,11 +66,10 @@ def vs_mitsuba(d, scale=1):
 def emit(scene, n=N_SAMPLES, seed=0):
     """n rays from the scene's lights, and their wavelengths."""
     L = scene.lights
-    L.prepare_emission(scene)
     rng = mi.PCG32(n, seed)
     wl = SampledWavelengths.sample_visible(rng.next_float32())
     u = [rng.next_float32() for _ in range(5)]
-    s = L.sample_Le(u[0], mi.Point2f(u[1], u[2]), mi.Point2f(u[3], u[4]), wl, mi.Bool(True))
+    s = L.sample_Le(L.sampler("power"), u[0], mi.Point2f(u[1], u[2]), mi.Point2f(u[3], u[4]), wl, mi.Bool(True))
     return s, wl
 
 
@@ -141,9 +140,7 @@ def _chi2(sample_dir, pdf_dir, res=51, ires=16):
 
 
 def _one_light(**em):
-    sc = scene_with(**em)
-    sc.lights.prepare_emission(sc)
-    return sc
+    return scene_with(**em)
 
 
 @pytest.mark.parametrize("kind", ["area", "spot", "envmap"])
@@ -166,8 +163,8 @@ def test_sample_Le_direction_chi2(kind):
     def sample_dir(u):
         n = dr.width(u)
         wl = SampledWavelengths(mi.Spectrum(550.0) + dr.zeros(mi.Spectrum, n), mi.Spectrum(1.0))
-        s = lights.sample_Le(dr.zeros(mi.Float, n), mi.Point2f(0.5, 0.5) + dr.zeros(mi.Point2f, n), u, wl,
-                             mi.Bool(True))
+        s = lights.sample_Le(lights.sampler("power"), dr.zeros(mi.Float, n),
+                             mi.Point2f(0.5, 0.5) + dr.zeros(mi.Point2f, n), u, wl, mi.Bool(True))
         return s.d
 
     def pdf_dir(d):
@@ -197,17 +194,25 @@ def test_pdf_Le_matches_sample(kind):
         return np.broadcast_to(np.array(x), ok.shape)
     np.testing.assert_allclose(arr(pp)[ok], arr(s.pdf_pos)[ok], rtol=1e-4)
     np.testing.assert_allclose(arr(pd)[ok], arr(s.pdf_dir)[ok], rtol=2e-3)
-    pmf = np.array(sc.lights.pmf_Le(s.light, mi.Bool(True)))
+    pmf = np.array(sc.lights.pmf_Le(sc.lights.sampler("power"), s.light, mi.Bool(True)))
     np.testing.assert_allclose(pmf, np.array(s.pmf), rtol=1e-6)
 
 
-def test_prepare_emission_required():
-    sc = scene_with(l={"type": "point"}, integrator={"type": "ptracer"})
-    sc.lights.prepare_emission(sc)
-    sc.build()                                  # a rebuild (params.update) invalidates it
-    with pytest.raises(RuntimeError, match="prepare_emission"):
-        sc.lights.sample_Le(mi.Float(0.5), mi.Point2f(0.5), mi.Point2f(0.5),
-                            SampledWavelengths.sample_visible(mi.Float(0.5)), mi.Bool(True))
+def test_rebuild_refreshes_the_light_samplers():
+    """Light samplers are built per scene build: after params.update() the integrator's
+    prepare step takes the new ones, whose probabilities follow the new powers (a stale
+    emission sampler would keep picking the lights 1:1)."""
+    sc = scene_with(a={"type": "point", "position": [0.3, 0.5, 0.0], "intensity": 1.0},
+                    b={"type": "point", "position": [-0.3, 0.5, 0.0], "intensity": 1.0},
+                    integrator={"type": "ptracer"})
+    old = sc.integrator.emission_sampler
+    np.testing.assert_allclose(old.pmf_np, [0.5, 0.5], rtol=1e-6)
+    params = pbr.traverse(sc)
+    params["a.intensity.value"] = mi.Color3f(3.0)
+    params.update()
+    new = sc.integrator.emission_sampler
+    assert new is not old and new is sc.lights.sampler("power")
+    np.testing.assert_allclose(new.pmf_np, [0.75, 0.25], rtol=1e-5)
 
 
 # --------------------------------------------------------------------------- camera
@@ -410,13 +415,13 @@ def test_light_tracing_integrator_foundation():
 
     class Split(LightTracingIntegrator):
         name = "split"
-        light_sampler = "power"
 
         def __init__(self):
             self.pt = ParticleTracerIntegrator(Props({"type": "ptracer", "max_depth": 4}, "scene.integrator"))
 
         def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
             self.pt.camera, self.pt.splats = self.camera, self.splats
+            self.pt.emission_sampler = self.emission_sampler
             self.pt._trace(scene, rng, wl, active)
             return self.pt._visible_emitters(scene, ray, wl, active), mi.Bool(active)
 

@@ -450,7 +450,8 @@ def test_huge_and_tiny_intensities():
     d = box(em=big, em2=tiny)
     d["integrator"]["light_sampler"] = "power"
     scene = pbr.load_dict(d)
-    pmf = scene.lights.sampler.pmf_np if hasattr(scene.lights.sampler, "pmf_np") else None
+    sampler = scene.integrator.light_sampler
+    pmf = sampler.pmf_np if hasattr(sampler, "pmf_np") else None
     if pmf is not None:
         assert pmf[1] == pytest.approx(1e-12, rel=1e-3)
     img = np.asarray(pbr.render(scene, spp=32, seed=1))
@@ -466,7 +467,7 @@ def test_zero_intensity_light_is_never_sampled():
             em1={"type": "spot", "to_world": T().look_at(**SPOT_FRAME), "intensity": 0.0})
     d["integrator"]["light_sampler"] = "power"
     scene = pbr.load_dict(d)
-    s = scene.lights.sampler
+    s = scene.integrator.light_sampler
     u = mi.Float(np.linspace(0, 1, 100001, endpoint=False))
     idx, pmf = s.sample(u, mi.Point3f(0), mi.Normal3f(0, 0, 1), True)
     idx, pmf = np.array(idx), np.array(pmf)

@@ -173,7 +173,7 @@ def test_hash_grid_finds_exactly_the_points_within_radius():
     d = box(max_depth=-1)
     scene = pbr.load_dict(d)
     integ = scene.integrator
-    scene.lights.prepare_emission(scene)
+    integ.prepare(scene)
     integ._tables(scene)
     cam = scene.sensors[0]
     wl = integ._wavelengths(0, 0)

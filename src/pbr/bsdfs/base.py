@@ -38,15 +38,14 @@ class BSDFSample(Struct):
 class ShadingContext(metaclass=VariantStruct):
     """What a BSDF needs at a hit: the Mitsuba surface interaction (``si.wi`` local,
     ``si.uv``) and the sampled wavelengths. A Dr.Jit struct, so that ``dr.switch`` can
-    pass it to the families; ``textures`` is kept for callers but families use their own
-    reference (set by ``BSDFSet.build``)."""
+    pass it to the families (which read textures through their own reference, set by
+    ``BSDFSet.build``)."""
 
     _fields = {"si": "SurfaceInteraction3f", "wl": SampledWavelengths}
 
-    def __init__(self, si=None, wl=None, textures=None):
+    def __init__(self, si=None, wl=None):
         self.si = si if si is not None else mi.SurfaceInteraction3f()
         self.wl = wl if wl is not None else SampledWavelengths()
-        self.textures = textures
 
 
 class BSDFType:

@@ -51,8 +51,17 @@ class BSDFSet:
         return len(self.entries) - 1
 
     def _add_blend(self, loader, props) -> int:
-        """Mitsuba's ``blendbsdf`` (``weight``, two nested BSDFs) / pbrt-v4's ``mix``
-        (``amount``): f = (1 - w) f_0 + w f_1."""
+        """Mitsuba's ``blendbsdf`` / pbrt-v4's ``mix``: f = (1 - w) f_0 + w f_1; sampling
+        reports the mixture's pdf.
+
+        ==========  =======  =======  ===============================
+        name        type     default  meaning
+        ==========  =======  =======  ===============================
+        weight      texture  0.5      w (blendbsdf)
+        amount      texture  0.5      w (mix)
+        (two keys)  BSDF     -        the two nested BSDFs, f_0 first
+        ==========  =======  =======  ===============================
+        """
         wkey = "weight" if props.type == "blendbsdf" else "amount"
         nested = [k for k, v in props.children() if k != wkey]
         if len(nested) != 2:
@@ -69,6 +78,19 @@ class BSDFSet:
         return len(self.entries) - 1
 
     def _add_perturbed(self, loader, props) -> int:
+        """Mitsuba's ``normalmap`` / ``bumpmap``: the nested BSDF in a perturbed shading frame.
+
+        ======================  =======  =======  ===============================================
+        name                    type     default  meaning
+        ======================  =======  =======  ===============================================
+        normalmap               texture  -        normalmap: a raw bitmap of normals in [0, 1]^3
+        (a texture key)         texture  -        bumpmap: a raw bitmap of heights
+        scale                   float    1        bumpmap: factor on the height gradient
+        flip_invalid_normals    bool     true     flip normals facing away from the incident side
+        use_shadowing_function  bool     true     Estevez et al.'s shadowing term
+        (a BSDF key)            BSDF     -        the nested BSDF
+        ======================  =======  =======  ===============================================
+        """
         kind, slot, scale, flip, shadow, key = perturb.parse(loader, props, bsdf_names())
         inner = loader.bsdf(props.raw(key), props.key(key))
         props.finish()
@@ -79,6 +101,15 @@ class BSDFSet:
         return len(self.entries) - 1
 
     def _add_mask(self, loader, props) -> int:
+        """Mitsuba's ``mask``: light passes straight through with probability 1 - opacity.
+
+        =======  =======  =======  =============================================
+        name     type     default  meaning
+        =======  =======  =======  =============================================
+        opacity  texture  0.5      opacity (first wavelength), clamped to [0, 1]
+        (a key)  BSDF     -        the nested BSDF
+        =======  =======  =======  =============================================
+        """
         nested = [k for k, v in props.children() if k != "opacity"]
         if len(nested) != 1:
             raise props.error(None, f"mask takes exactly one nested BSDF, got {len(nested)}")
@@ -94,6 +125,15 @@ class BSDFSet:
         return len(self.entries) - 1
 
     def _add_twosided(self, loader, props) -> int:
+        """Mitsuba's ``twosided``: the back side uses the second nested BSDF, or the first one
+        mirrored.
+
+        =================  ====  =======  =============================
+        name               type  default  meaning
+        =================  ====  =======  =============================
+        (one or two keys)  BSDF  -        front BSDF, then the back one
+        =================  ====  =======  =============================
+        """
         nested = [k for k, v in props.children()]
         if not 1 <= len(nested) <= 2:
             raise props.error(None, f"twosided takes one or two nested BSDFs, got {len(nested)}")

@@ -31,7 +31,7 @@ def conductor_materials() -> list[str]:
 def _load_eta_k(loader, props):
     """Texture slots (eta, k) from ``material`` or explicit ``eta``/``k``."""
     has_ek = props.has("eta") or props.has("k")
-    material = props.string("material", "none" if has_ek else "none")
+    material = props.string("material", "none")
     if has_ek:
         if props.has("material"):
             raise props.error("material", "give either 'material' or 'eta'/'k', not both")
@@ -52,6 +52,19 @@ def _load_eta_k(loader, props):
 
 @BSDF_TYPES.register("conductor")
 class Conductor(BSDFType):
+    """``conductor``: a smooth metal (Mitsuba's): exact complex Fresnel reflection.
+
+    ====================  =======  =======  ==================================================
+    name                  type     default  meaning
+    ====================  =======  =======  ==================================================
+    material              string   'none'   a Mitsuba metal (Au, Ag, Al, Cu, Cr, ...; see
+                                            conductor_materials()); 'none': a perfect mirror
+    eta                   texture  0        real part of the IOR instead of material
+    k                     texture  1        imaginary part (absorption) instead of material
+    specular_reflectance  texture  1        factor on the reflection (not physical; Mitsuba's)
+    ====================  =======  =======  ==================================================
+    """
+
     name = "conductor"
     flags = REFLECTION | SPECULAR
 
@@ -83,6 +96,23 @@ class Conductor(BSDFType):
 
 @BSDF_TYPES.register("roughconductor")
 class RoughConductor(Conductor):
+    """``roughconductor``: a rough metal (Mitsuba's): microfacet reflection with complex
+    Fresnel; anisotropic roughness follows dp/du.
+
+    ====================  =======  ========  =======================================================
+    name                  type     default   meaning
+    ====================  =======  ========  =======================================================
+    material              string   'none'    a Mitsuba metal (Au, Ag, Al, Cu, Cr, ...; see
+                                             conductor_materials()); 'none': a perfect mirror
+    eta                   texture  0         real part of the IOR instead of material
+    k                     texture  1         imaginary part (absorption) instead of material
+    specular_reflectance  texture  1         factor on the reflection (not physical; Mitsuba's)
+    distribution          string   beckmann  microfacet distribution: 'beckmann' or 'ggx'
+    alpha                 texture  0.1       roughness (RMS slope), or anisotropic alpha_u / alpha_v
+    sample_visible        bool     true      sample visible normals (GGX; Beckmann samples D cos)
+    ====================  =======  ========  =======================================================
+    """
+
     name = "roughconductor"
     flags = REFLECTION | GLOSSY
 

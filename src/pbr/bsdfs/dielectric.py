@@ -241,8 +241,19 @@ class _Dielectric(BSDFType):
 
 @BSDF_TYPES.register("dielectric")
 class SmoothDielectric(_Dielectric):
-    """``dielectric``: a smooth interface; reflection with probability R (Fresnel),
-    refraction otherwise (total internal reflection included: R = 1)."""
+    """``dielectric``: a smooth interface between two dielectrics (Mitsuba's); a
+    wavelength-dependent IOR disperses light (only the first wavelength goes on).
+
+    ======================  =========  =======  =========================================================
+    name                    type       default  meaning
+    ======================  =========  =======  =========================================================
+    int_ior                 float|str  'bk7'    interior IOR: a number, a Mitsuba name, a 'spectrum' or a
+                                                Sellmeier glass name (glass-BK7, ...: dispersion)
+    ext_ior                 float|str  'air'    exterior IOR (as int_ior)
+    specular_reflectance    texture    1        factor on the reflected lobe (not physical; Mitsuba's)
+    specular_transmittance  texture    1        factor on the transmitted lobe
+    ======================  =========  =======  =========================================================
+    """
 
     name = "dielectric"
     flags = REFLECTION | TRANSMISSION | SPECULAR
@@ -258,9 +269,19 @@ class SmoothDielectric(_Dielectric):
 
 @BSDF_TYPES.register("thindielectric")
 class ThinDielectric(_Dielectric):
-    """``thindielectric``: a thin slab with two parallel interfaces (a window pane).
-    Inter-reflections inside the slab sum to R' = 2R / (1 + R); light that gets
-    through leaves undeviated (wo = -wi), so no IOR is crossed and no scaling applies."""
+    """``thindielectric``: a thin dielectric slab (Mitsuba's): reflection R' = 2R / (1 + R),
+    straight transmission.
+
+    ======================  =========  =======  =========================================================
+    name                    type       default  meaning
+    ======================  =========  =======  =========================================================
+    int_ior                 float|str  'bk7'    interior IOR: a number, a Mitsuba name, a 'spectrum' or a
+                                                Sellmeier glass name (glass-BK7, ...: dispersion)
+    ext_ior                 float|str  'air'    exterior IOR (as int_ior)
+    specular_reflectance    texture    1        factor on the reflected lobe (not physical; Mitsuba's)
+    specular_transmittance  texture    1        factor on the transmitted lobe
+    ======================  =========  =======  =========================================================
+    """
 
     name = "thindielectric"
     flags = REFLECTION | TRANSMISSION | SPECULAR
@@ -280,13 +301,22 @@ class ThinDielectric(_Dielectric):
 
 @BSDF_TYPES.register("roughdielectric")
 class RoughDielectric(_Dielectric):
-    """``roughdielectric``: microfacet reflection and refraction (Walter et al. 2007).
+    """``roughdielectric``: a rough dielectric interface (Mitsuba's), reflecting and
+    refracting through microfacets on both sides.
 
-    A microfacet normal m is sampled (visible normals for GGX when ``sample_visible``;
-    D(m) cos(theta_m) otherwise, with Walter's roughness widening 1.2 - 0.2 sqrt|cos_i|
-    that tames the weights, as Mitsuba), then reflection or refraction about m is chosen
-    with probability F(wi.m) or 1 - F. ``eval_pdf`` recovers m as the generalised half
-    vector and returns the same density, including the half-vector Jacobians."""
+    ======================  =========  ========  =========================================================
+    name                    type       default   meaning
+    ======================  =========  ========  =========================================================
+    int_ior                 float|str  'bk7'     interior IOR: a number, a Mitsuba name, a 'spectrum' or a
+                                                 Sellmeier glass name (glass-BK7, ...: dispersion)
+    ext_ior                 float|str  'air'     exterior IOR (as int_ior)
+    specular_reflectance    texture    1         factor on the reflected lobe (not physical; Mitsuba's)
+    specular_transmittance  texture    1         factor on the transmitted lobe
+    distribution            string     beckmann  microfacet distribution: 'beckmann' or 'ggx'
+    alpha                   texture    0.1       roughness (RMS slope), or anisotropic alpha_u / alpha_v
+    sample_visible          bool       true      sample visible normals (GGX; Beckmann samples D cos)
+    ======================  =========  ========  =========================================================
+    """
 
     name = "roughdielectric"
     flags = REFLECTION | TRANSMISSION | GLOSSY

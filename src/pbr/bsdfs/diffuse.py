@@ -13,6 +13,15 @@ from .base import BSDF_TYPES, BSDFType, BSDFSample, REFLECTION, DIFFUSE
 
 @BSDF_TYPES.register("diffuse")
 class Diffuse(BSDFType):
+    """``diffuse``: the Lambertian reflector (one-sided).
+
+    ===========  =======  =======  =======
+    name         type     default  meaning
+    ===========  =======  =======  =======
+    reflectance  texture  0.5      albedo
+    ===========  =======  =======  =======
+    """
+
     name = "diffuse"
     flags = REFLECTION | DIFFUSE
 

@@ -27,6 +27,17 @@ from .base import BSDF_TYPES, BSDFType, BSDFSample, REFLECTION, TRANSMISSION, DI
 
 @BSDF_TYPES.register("diffusetransmission")
 class DiffuseTransmission(BSDFType):
+    """``diffusetransmission`` (pbrt-v4's): cosine lobes on both sides of the surface.
+
+    =============  =======  =======  ================================================
+    name           type     default  meaning
+    =============  =======  =======  ================================================
+    reflectance    texture  0.25     albedo of the reflected lobe
+    transmittance  texture  0.25     albedo of the transmitted lobe
+    scale          float    1        factor on both (each clamped to [0, 1] after it)
+    =============  =======  =======  ================================================
+    """
+
     name = "diffusetransmission"
     flags = REFLECTION | TRANSMISSION | DIFFUSE
 

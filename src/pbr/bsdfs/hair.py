@@ -1,55 +1,6 @@
-"""``hair``: the hair fibre scattering model of Chiang et al. 2016 (after d'Eon et al.
-2011), as pbrt-v4's ``HairBxDF`` and Mitsuba 3's ``hair`` plugin implement it.
-
-A fibre is a dielectric cylinder (relative IOR ``eta``) with an absorbing interior and
-tilted cuticle scales. Light entering at offset ``h`` across the fibre leaves after p
-internal paths: R (p = 0), TT (1), TRT (2) and all longer paths lumped together (p = 3).
-Each term is a product of a longitudinal lobe M_p (d'Eon's von Mises-Fisher-like
-distribution around the specular cone, variance v_p from ``longitudinal_roughness``,
-shifted by the scale tilt), an attenuation A_p (Fresnel and absorption along the
-refracted path) and an azimuthal lobe N_p (a trimmed logistic around the specular
-azimuth, scale from ``azimuthal_roughness``); the last term is uniform in azimuth:
-
-    f(wi, wo) |cos theta_o| = sum_{p<3} M_p A_p N_p + M_3 A_3 / (2 pi).
-
-The value already includes the cosine factor (as ``eval`` of every pbr BSDF): the sum
-above is a density over directions times the albedo, so with no absorption it
-integrates to 1 over the sphere. The fibre scatters over the whole sphere.
-
-Frame and offset (Mitsuba's convention; pbr's shading frame is Mitsuba's): the local
-y axis runs along the fibre and z is the surface normal of the round tube, as on
-Mitsuba's ``bsplinecurve``/``linearcurve`` (and ``cylinder``) shapes. The offset is
-h = sin(gamma_i), gamma_i the angle between the normal and wi projected into the
-fibre's cross-section. pbrt-v4 instead takes h = -1 + 2 v from the texture coordinate,
-because its curves are flat ribbons facing the ray; on a round tube both give the same h.
-
-Absorption, one of:
-
-- ``eumelanin``/``pheomelanin`` concentrations (defaults 1.3 and 0.2, Mitsuba's):
-  sigma_a = c_e S_e(lambda) + c_p S_p(lambda), where S_e, S_p are the sigmoid-polynomial
-  upsamplings (albedo form, so RGB clipped to [0, 1] like Mitsuba's) of d'Eon's RGB
-  coefficients (0.419, 0.697, 1.37) and (0.187, 0.4, 1.05). This is Mitsuba's spectral
-  conversion (pbrt-v4 upsamples the sum with its unbounded form instead; the spectra
-  differ slightly, so Mitsuba's is used for its images to match).
-- ``sigma_a`` (a spectrum/texture in inverse fibre radii; RGB values use pbr's unbounded
-  upsampling) times ``scale`` (default 1).
-- ``reflectance`` (pbrt-v4's, not in Mitsuba): an albedo texture c, turned into
-  sigma_a = (ln c / (5.969 - 0.215 b + 2.532 b^2 - 10.73 b^3 + 5.574 b^4 + 0.245 b^5))^2
-  with b the azimuthal roughness (Chiang et al.'s fit for a hair volume of colour c).
-
-Sampling is pbrt-v4's (and Mitsuba's, which maps random numbers the same way): a term p
-is chosen in proportion to the luminance of A_p (Mitsuba's weighting; pbrt-v4 averages
-over the wavelengths instead), then theta_o from M_p exactly, then the azimuth from the
-trimmed logistic N_p (uniform for p = 3). The density is that of the whole mixture, so
-the sample weight is f |cos| / pdf, exactly 1 without absorption.
-
-Numerics: M_p is evaluated in one log-space form valid for every variance,
--kappa (1 - cos(theta_i + theta_o)) + log I0(c) - c + log kappa - log(1 - e^{-2 kappa})
-(kappa = 1/v, c = kappa cos theta_i cos theta_o, the 1 - cos computed without
-cancellation), which equals both references' two branches (their log branch uses
-0.6931 for ln 2); I0 and log I0 are Mitsuba's series and asymptotic forms. Roughnesses
-are clamped to [0.01, 1] (pbrt-v4's range; Mitsuba accepts 0, where the model
-degenerates and its values become NaN).
+"""``hair``: the Chiang et al. 2016 hair fibre scattering model (Mitsuba's ``hair``,
+pbrt-v4's ``HairBxDF``): R, TT, TRT and residual lobes over the whole sphere. The
+model, its parameters and conventions: docs/materials.md.
 """
 
 from __future__ import annotations
@@ -253,6 +204,26 @@ def _is_number(v) -> bool:
 
 @BSDF_TYPES.register("hair")
 class Hair(BSDFType):
+    """``hair``: Chiang et al.'s hair fibre (Mitsuba's ``hair``, pbrt-v4's ``HairBxDF``), for
+    ``bsplinecurve``/``linearcurve`` shapes. Absorption from melanin, ``sigma_a`` or
+    ``reflectance`` (one of them).
+
+    ======================  =========  =======  =======================================================
+    name                    type       default  meaning
+    ======================  =========  =======  =======================================================
+    eumelanin               texture    1.3      eumelanin concentration
+    pheomelanin             texture    0.2      pheomelanin concentration
+    sigma_a                 texture    -        absorption coefficient instead of melanin (times scale)
+    scale                   float      1        factor on sigma_a
+    reflectance             texture    -        pbrt-v4's colour instead of melanin
+    longitudinal_roughness  texture    0.3      longitudinal roughness beta_m, in [0, 1]
+    azimuthal_roughness     texture    0.3      azimuthal roughness beta_n, in [0, 1]
+    scale_tilt              texture    2        tilt of the cuticle scales (degrees)
+    int_ior                 float|str  'amber'  IOR of the fibre (1.55)
+    ext_ior                 float|str  'air'    IOR around it
+    ======================  =========  =======  =======================================================
+    """
+
     name = "hair"
     flags = REFLECTION | TRANSMISSION | GLOSSY
 

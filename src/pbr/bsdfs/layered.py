@@ -1,44 +1,7 @@
-"""pbrt-v4's stochastic layered BSDFs: ``coateddiffuse`` and ``coatedconductor``.
-
-A slab of optical thickness ``thickness`` (a homogeneous medium with unit extinction,
-single-scattering ``albedo`` and a Henyey-Greenstein phase function of asymmetry
-``g``) lies between a dielectric interface on top (relative IOR ``eta``, isotropic or
-anisotropic GGX roughness; smooth where alpha < 1e-3 or eta = 1) and an opaque base:
-a Lambertian ``reflectance`` (coateddiffuse) or a conductor with complex IOR
-``conductor.eta`` + i ``conductor.k`` relative to the coating (coatedconductor). With
-``albedo`` 0 the slab only absorbs (transmittance exp(-thickness / |cos|) per crossing).
-
-No closed form exists; as in pbrt-v4 (Guo et al. 2018's position-free Monte Carlo),
-every query is a random walk between the two interfaces, written here as symbolic
-Dr.Jit loops (one kernel):
-
-* ``eval`` (f |cos_o|) averages ``nsamples`` walks of at most ``maxdepth`` events each.
-  A walk enters through the top (sampled transmission), bounces between base, medium and
-  top, and at every event connects to the light direction through the top interface
-  (next-event estimation with a transmission direction sampled from the light side, MIS
-  with the base/phase sample that leaves through the rough top). Russian roulette
-  after 3 events when the throughput falls below 0.25.
-* ``sample`` follows one walk from the camera direction until it leaves through the
-  top; its weight is the walk's f |cos| / pdf (unbiased, not eval / pdf).
-* The density reported for MIS (by ``eval_pdf`` and in ``BSDFSample.pdf``) is pbrt's
-  stochastic estimate (top reflection + transmission-reflection-transmission, MIS
-  combined) mixed 9:1 with the uniform sphere density.
-
-Each query seeds its own PCG32 stream from a hash of its directions (and of the sample's
-random numbers), as pbrt does: the same (wi, wo) gives the same value, so that both MIS
-strategies of a path use one density. The BSDF is two-sided (mirrored below the surface)
-and reflects only. Values are for radiance transport: transmission into the coating
-scales radiance by 1 / eta^2 and the way out by eta^2.
-
-Differences from pbrt-v4: Smith masking is the separable G1 G1 (pbr's microfacet module,
-as Mitsuba) rather than pbrt's height-correlated form; the anisotropic roughness axes
-are the shading frame's.
-
-Gradients (pbr's own; docs/layered.md): where a parameter carries gradients the walks
-sample with detached parameters and their weights carry the derivatives
-(:func:`_reweighted`, :func:`_free_flight`), their loops are unrolled
-(``dispatch.loop``), and the family is ``stochastic``: the path replay differentiates
-the sampled walk's weight instead of a second, independent estimate from ``eval``.
+"""Layered BSDFs (pbrt-v4's ``coateddiffuse`` and ``coatedconductor``): a dielectric
+coating over a diffuse or conductor base, with an optional homogeneous medium between,
+evaluated and sampled by stochastic random walks. The model and its costs:
+docs/layered.md.
 """
 
 from __future__ import annotations
@@ -683,7 +646,23 @@ class _Layered(BSDFType):
 
 @BSDF_TYPES.register("coateddiffuse")
 class CoatedDiffuse(_Layered):
-    """``coateddiffuse``: a Lambertian base under a dielectric coating (pbrt-v4)."""
+    """``coateddiffuse`` (pbrt-v4's): a Lambertian base under a dielectric coating, evaluated
+    by random walks between the interfaces (docs/layered.md).
+
+    ==============  =========  =======  =========================================================
+    name            type       default  meaning
+    ==============  =========  =======  =========================================================
+    reflectance     texture    0.5      albedo of the diffuse base
+    roughness       texture    0        GGX roughness of the coating (or uroughness / vroughness)
+    remaproughness  bool       true     roughness is pbrt-v4's perceptual value (alpha = sqrt)
+    eta             float|str  1.5      IOR of the coating (a number, name or spectrum)
+    thickness       texture    0.01     thickness of the coating's medium
+    albedo          texture    0        single-scattering albedo of the medium in the coating
+    g               texture    0        Henyey-Greenstein asymmetry of that medium
+    maxdepth        int        10       longest random walk between the interfaces
+    nsamples        int        1        walks averaged per evaluation
+    ==============  =========  =======  =========================================================
+    """
 
     name = "coateddiffuse"
 
@@ -710,10 +689,26 @@ def _metal(loader, name: str, comp: str, path: str) -> int:
 
 @BSDF_TYPES.register("coatedconductor")
 class CoatedConductor(_Layered):
-    """``coatedconductor``: a conductor base under a dielectric coating (pbrt-v4). The
-    conductor is ``conductor.eta``/``conductor.k`` (default copper) or, instead, an
-    artist ``reflectance`` (eta 1, k = 2 sqrt(r) / sqrt(1 - r)); both are divided by the
-    coating's IOR."""
+    """``coatedconductor`` (pbrt-v4's): a conductor base under a dielectric coating (random
+    walks, docs/layered.md). The coating's parameters are prefixed ``interface.``; the
+    conductor's eta and k are divided by the coating's IOR.
+
+    ==============  =======  =======  ================================================================
+    name            type     default  meaning
+    ==============  =======  =======  ================================================================
+    interface.*     -        -        roughness, uroughness, vroughness, eta (1.5) of the coating
+    conductor.eta   texture  Cu       the conductor's IOR (a spectrum or a name: 'metal-Cu-eta', 'Au')
+    conductor.k     texture  Cu       its absorption
+    conductor.*     -        0        roughness, uroughness, vroughness of the conductor
+    reflectance     texture  -        an artist reflectance instead of conductor.eta / conductor.k
+    remaproughness  bool     true     roughness is pbrt-v4's perceptual value (alpha = sqrt)
+    thickness       texture  0.01     thickness of the coating's medium
+    albedo          texture  0        single-scattering albedo of the medium in the coating
+    g               texture  0        Henyey-Greenstein asymmetry of that medium
+    maxdepth        int      10       longest random walk between the interfaces
+    nsamples        int      1        walks averaged per evaluation
+    ==============  =======  =======  ================================================================
+    """
 
     name = "coatedconductor"
     _prefix = "interface."

@@ -1,34 +1,6 @@
-"""``measured``: tabulated BRDFs of the RGL material database (Dupuy & Jakob 2018,
-"An adaptive parameterization for efficient material acquisition and rendering"), read
-from the ``.bsdf`` files that Mitsuba 3's ``measured`` plugin and pbrt-v4's
-``MeasuredBxDF`` read.
-
-The model. For an incident direction wi (local frame) and a half vector m, the BRDF is
-
-    f(wi, wo) |cos theta_o| = S(s; wi, lambda) * D(m) / (4 sigma(wi)),
-
-where ``D`` is the micro-facet normal distribution (field ``ndf``), ``sigma`` its projected
-area toward wi (``sigma``), and ``S`` a spectral reflectance tabulated over a 2D *sample
-space*: ``s`` is the pre-image of m under the visible-normal warp of the file (``vndf``),
-so the table's resolution follows the lobe. The factor D/(4 sigma) is applied only when
-the file's ``jacobian`` flag is set (as in Mitsuba). Directions enter the tables through
-u = (sqrt(2 theta / pi), (phi + pi) / (2 pi)); for isotropic files (at most 2 phi_i
-values) the azimuth of m is taken relative to that of wi. Anisotropic files may cover
-only a half or a quarter of the azimuths of wi (``reduction`` 2 or 4): directions are then
-folded by the mirror symmetries of the surface.
-
-Sampling draws a point of the sample space from the ``luminance`` table (a density over
-it, proportional to the luminance of S), maps it through the VNDF warp to m, and reflects
-wi about m; the density is the product of the two warps' densities and the Jacobian of
-u -> m -> wo.
-
-The 2D tables are Mitsuba's own warps (``mi.MarginalContinuous2D0/2/3``: bilinear
-densities on a regular grid over [0, 1]^2, linear interpolation in the parameters
-phi_i, theta_i and the wavelength), so pbr evaluates the same interpolant as Mitsuba.
-pbr is spectral: spectra are interpolated at the sampled wavelengths (clamped at the
-file's first/last wavelength); RGB files are refused. The file is read by
-:func:`read_tensor_file` (Mitsuba's ``TensorFile`` binding cannot return shapes or
-uint8 fields in 3.9).
+"""``measured``: Mitsuba's tabulated BRDFs from the RGL material database (Dupuy & Jakob
+2018): the file reader (:class:`RGLMaterial`) and the BSDF family. Tables and
+sampling: docs/materials.md.
 """
 
 from __future__ import annotations
@@ -223,6 +195,16 @@ def _jacobian(u_x, sin_theta_m, wi_dot_m):
 
 @BSDF_TYPES.register("measured")
 class Measured(BSDFType):
+    """``measured`` (Mitsuba's): a tabulated BRDF from the RGL material database (Dupuy &
+    Jakob 2018, spectral files), one-sided.
+
+    ========  ======  =======  =========================
+    name      type    default  meaning
+    ========  ======  =======  =========================
+    filename  string  -        the .bsdf file (required)
+    ========  ======  =======  =========================
+    """
+
     name = "measured"
     flags = REFLECTION | GLOSSY
 

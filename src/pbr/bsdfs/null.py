@@ -18,6 +18,8 @@ def pass_through(wi, pdf, active) -> BSDFSample:
 
 @BSDF_TYPES.register("null")
 class Null(BSDFType):
+    """``null``: light passes unchanged (medium boundaries, cut-outs). No parameters."""
+
     name = "null"
     flags = TRANSMISSION | SPECULAR
 

@@ -18,6 +18,19 @@ from .fresnel import fresnel_dielectric, fresnel_diffuse_reflectance, lookup_ior
 
 @BSDF_TYPES.register("plastic")
 class Plastic(BSDFType):
+    """``plastic``: Mitsuba's smooth plastic: a diffuse base under a smooth dielectric coating.
+
+    ====================  =========  ===============  ===================================================
+    name                  type       default          meaning
+    ====================  =========  ===============  ===================================================
+    int_ior               float|str  'polypropylene'  interior IOR (a number or a Mitsuba name)
+    ext_ior               float|str  'air'            exterior IOR
+    diffuse_reflectance   texture    0.5              albedo of the diffuse base
+    specular_reflectance  texture    1                factor on the specular coating
+    nonlinear             bool       false            account for the colour shift of internal scattering
+    ====================  =========  ===============  ===================================================
+    """
+
     name = "plastic"
     flags = REFLECTION | DIFFUSE | SPECULAR
 

@@ -1,57 +1,6 @@
-"""Mitsuba 3's ``principled`` and ``principledthin`` BSDFs (Burley's Disney BSDF, 2012
-and 2015), with Mitsuba's parameter names, defaults, lobes and lobe-selection scheme,
-so that images agree with Mitsuba's.
-
-``principled`` (a closed object's surface; the normal points outside):
-
-- main specular lobe: GGX microfacet reflection with alpha = roughness^2 (stretched by
-  ``anisotropic``: alpha_u,v = roughness^2 / sqrt(1 - 0.9 a) and * sqrt(1 - 0.9 a),
-  at least 0.001). Its Fresnel term mixes the dielectric Fresnel (eta), Schlick with
-  ``base_color`` as F0 (weight ``metallic``) and a tinted Schlick (``spec_tint``). From
-  inside, only the plain dielectric Fresnel, scaled by the transmission weight.
-- main transmission lobe (``spec_trans``): Walter et al.'s microfacet refraction with
-  the same distribution, scaled by sqrt(base_color) and (1 - metallic) spec_trans.
-- diffuse: Burley's diffuse with retro-reflection, blended with the Hanrahan-Krueger
-  "fake subsurface" by ``flatness``; weight (1 - metallic)(1 - spec_trans).
-- sheen (``sheen``, ``sheen_tint``) and clearcoat (GTR1 distribution with alpha from 0.1
-  to 0.001 by ``clearcoat_gloss``, Schlick F0 = 0.04, fixed Smith masking alpha 0.25).
-
-``principledthin`` (a two-sided sheet, no refraction): GGX reflection and a
-"transmission" that reflects about a microfacet with roughness scaled by
-(0.65 eta - 0.35) and mirrors the result through the sheet, both weighted by
-``spec_trans``; Burley's diffuse reflection, Lambertian transmission (``diff_trans``,
-0..2, halved internally) and sheen.
-
-Conventions copied from Mitsuba (they decide what its images look like):
-
-- Scalar parameters read the texture's value at the first sampled wavelength;
-  ``base_color`` is spectral. Luminance (for the tints) is Mitsuba's spectral one:
-  the mean of CIE y(lambda) * base_color over the sampled wavelengths (not normalised).
-- Lobes are selected with Mitsuba's probabilities: from outside, in proportion to
-  ``main_specular_sampling_rate`` (split into reflection/transmission by the
-  dielectric Fresnel at the sampled microfacet), 0.25 clearcoat
-  ``clearcoat_sampling_rate`` and (1 - metallic)(1 - spec_trans)
-  ``diffuse_reflectance_sampling_rate``; from inside, reflection/refraction by Fresnel.
-  The sample's density is the full mixture density (no delta lobes, so MIS applies).
-- Optional lobes (``anisotropic``, ``spec_trans``, ``metallic``, ``spec_tint``,
-  ``sheen``, ``sheen_tint``, ``flatness``, ``clearcoat``, ``diff_trans``) are "on" when
-  given and not a float 0, as Mitsuba's flags; a kernel has their code only when some
-  instance of the family turns them on.
-- ``specular`` sets eta = 2 / (1 - sqrt(0.08 specular)) - 1 (default 0.5: eta 1.5);
-  with ``spec_trans`` on, specular 0 becomes 1e-3 and eta 1 becomes 1.001.
-
-Not energy conserving (Mitsuba's model; measured in tests/test_principled.py): the
-diffuse, specular, sheen and clearcoat lobes are added without any coupling, and
-Burley's retro-reflection reflects more than it receives on rough surfaces. White
-(base_color 1) directional albedos: 1.04 at normal incidence and 1.18 at 75 degrees
-for roughness 1 (specular 0), 1.14 at 75 degrees with the defaults; sheen 1 alone
-adds up to 0.08 near grazing. Pure metal (metallic 1), pure glass (spec_trans 1),
-the thin sheet's specular pair (spec_trans 1) and pure Lambertian thin transmission
-(diff_trans 2) never gain energy.
-
-One deliberate difference: from inside a principled object without transmission
-(where the BSDF is zero and Mitsuba's sampling fails), the density is 0 rather than
-Mitsuba's nonzero value; no image changes, and sampling and density agree.
+"""``principled`` and ``principledthin``: Mitsuba 3's Disney-style BSDFs (Burley 2012/2015),
+with Mitsuba's lobes, sampling rates and conventions. The lobes and the measured
+differences: docs/materials.md.
 """
 
 from __future__ import annotations
@@ -250,6 +199,31 @@ class _PrincipledFamily(BSDFType):
 
 @BSDF_TYPES.register("principled")
 class Principled(_PrincipledFamily):
+    """``principled``: Mitsuba's Disney-style BSDF (its lobes: docs/materials.md).
+    Optional lobe parameters are off when not given.
+
+    =================================  =======  =======  ========================================================
+    name                               type     default  meaning
+    =================================  =======  =======  ========================================================
+    base_color                         texture  0.5      base colour
+    roughness                          texture  0.5      perceptual roughness (alpha = roughness^2)
+    anisotropic                        texture  off      anisotropy of the specular lobes, in [0, 1]
+    metallic                           texture  off      metal fraction
+    spec_trans                         texture  off      specular transmission fraction
+    eta                                float    -        IOR of the dielectric lobes (instead of specular)
+    specular                           float    0.5      specular amount: eta = 2 / (1 - sqrt(0.08 specular)) - 1
+    spec_tint                          texture  off      tint of the dielectric reflection toward base_color
+    sheen                              texture  off      sheen amount
+    sheen_tint                         texture  off      tint of the sheen toward base_color
+    flatness                           texture  off      blend of Burley diffuse toward a fake subsurface
+    clearcoat                          texture  off      clearcoat amount
+    clearcoat_gloss                    texture  off      clearcoat glossiness (GTR1 alpha 0.1 -> 0.001)
+    main_specular_sampling_rate        float    1        relative sampling rate of the main specular lobes
+    clearcoat_sampling_rate            float    1        relative sampling rate of the clearcoat
+    diffuse_reflectance_sampling_rate  float    1        relative sampling rate of the diffuse lobe
+    =================================  =======  =======  ========================================================
+    """
+
     name = "principled"
     flags = REFLECTION | TRANSMISSION | DIFFUSE | GLOSSY
     _ALWAYS = (("base_color", 0.5), ("roughness", 0.5))
@@ -420,6 +394,29 @@ class Principled(_PrincipledFamily):
 
 @BSDF_TYPES.register("principledthin")
 class PrincipledThin(_PrincipledFamily):
+    """``principledthin``: Mitsuba's thin-sheet variant of ``principled`` (no metal, no
+    clearcoat; adds diffuse transmission).
+
+    ====================================  =======  =======  ================================================
+    name                                  type     default  meaning
+    ====================================  =======  =======  ================================================
+    base_color                            texture  0.5      base colour
+    roughness                             texture  0.5      perceptual roughness
+    eta                                   texture  1.5      IOR of the sheet
+    anisotropic                           texture  off      anisotropy of the specular lobes
+    spec_trans                            texture  off      specular transmission fraction
+    spec_tint                             texture  off      tint of the specular reflection
+    sheen                                 texture  off      sheen amount
+    sheen_tint                            texture  off      tint of the sheen
+    flatness                              texture  off      blend of Burley diffuse toward a fake subsurface
+    diff_trans                            texture  off      diffuse transmission fraction, in [0, 2]
+    specular_reflectance_sampling_rate    float    1        relative sampling rates of the four lobes
+    specular_transmittance_sampling_rate  float    1
+    diffuse_transmittance_sampling_rate   float    1
+    diffuse_reflectance_sampling_rate     float    1
+    ====================================  =======  =======  ================================================
+    """
+
     name = "principledthin"
     flags = REFLECTION | TRANSMISSION | DIFFUSE | GLOSSY
     _ALWAYS = (("base_color", 0.5), ("roughness", 0.5), ("eta", 1.5))

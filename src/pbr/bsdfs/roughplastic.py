@@ -1,26 +1,6 @@
-"""``roughplastic``: Mitsuba 3's rough plastic, a diffuse base under a rough dielectric
-coating (isotropic GGX or Beckmann microfacets).
-
-The coating reflects a glossy microfacet lobe F D G / (4 cos_i). Light that enters the
-coating scatters diffusely in the base, is re-reflected inside the coating (the internal
-reflectance R_int, folded in as 1 / (1 - R_int), or 1 / (1 - reflectance R_int) with
-``nonlinear``) and leaves again:
-
-    f_d cos_o = reflectance / (1 - R_int) * T(cos_i) T(cos_o) cos_o / (eta^2 pi)
-
-T(mu) is the fraction of light arriving at cos(theta) = mu that the rough interface
-transmits (microfacet refraction, masked on the way in, shadowed on the way out), and
-R_int its hemispherical internal reflectance seen from the base side. As in Mitsuba,
-both are precomputed per instance when the scene is loaded: T on 64 equally spaced
-values of mu (the first clamped to 1e-6) and looked up by linear interpolation, R_int
-as twice the plain mean over the same 64 points of mu times the internal directional
-reflectance. Here the integrals over microfacet normals are done with numpy
-Gauss-Legendre quadrature in our own parameterisation (see :func:`coating_integrals`).
-
-Lobes are chosen as in Mitsuba: the glossy lobe with probability proportional to
-(1 - T(cos_i)) times the specular/diffuse mean ratio; sampled weights are the full
-f / pdf of the mixture. The roughness ``alpha`` is a plain number (as in Mitsuba);
-anisotropic roughness is rejected like Mitsuba does.
+"""``roughplastic``: Mitsuba's rough plastic: a microfacet dielectric coating over a
+diffuse base, with the coating's transmittance tabulated per instance at load time.
+The model: docs/materials.md.
 """
 
 from __future__ import annotations
@@ -224,6 +204,23 @@ def lerp_table(table, offset, x, active):
 
 @BSDF_TYPES.register("roughplastic")
 class RoughPlastic(Plastic):
+    """``roughplastic``: Mitsuba's rough plastic (isotropic roughness only); the coating's
+    transmittance tables are computed per instance at load time.
+
+    ====================  =========  ===============  =======================================================
+    name                  type       default          meaning
+    ====================  =========  ===============  =======================================================
+    int_ior               float|str  'polypropylene'  interior IOR (a number or a Mitsuba name)
+    ext_ior               float|str  'air'            exterior IOR
+    diffuse_reflectance   texture    0.5              albedo of the diffuse base
+    specular_reflectance  texture    1                factor on the specular coating
+    nonlinear             bool       false            account for the colour shift of internal scattering
+    distribution          string     beckmann         microfacet distribution: 'beckmann' or 'ggx'
+    alpha                 texture    0.1              roughness (RMS slope), or anisotropic alpha_u / alpha_v
+    sample_visible        bool       true             sample visible normals (GGX; Beckmann samples D cos)
+    ====================  =========  ===============  =======================================================
+    """
+
     name = "roughplastic"
     flags = REFLECTION | DIFFUSE | GLOSSY
 

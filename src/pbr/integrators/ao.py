@@ -23,13 +23,25 @@ import mitsuba as mi
 
 from ..sampling import cosine_hemisphere_pdf, square_to_cosine_hemisphere
 from ..spectrum import d65
-from .base import INTEGRATORS, SamplingIntegrator, PRIMAL
+from .base import INTEGRATORS, SamplingIntegrator
 
 
 @INTEGRATORS.register("ambientocclusion")
 class AOIntegrator(SamplingIntegrator):
+    """``ambientocclusion`` (pbrt-v4's ``AOIntegrator``): the cosine-weighted unoccluded
+    fraction of the hemisphere at the surface a camera ray sees, times a unit-luminance
+    white (1 on an open plane, 0 in a closed box).
+
+    ===========  =====  =======  ===========================================================
+    name         type   default  meaning
+    ===========  =====  =======  ===========================================================
+    cossample    bool   true     cosine-weighted directions (else uniform on the hemisphere)
+    maxdistance  float  inf      length of the occlusion rays
+    ===========  =====  =======  ===========================================================
+    """
+
     name = "ambientocclusion"
-    light_sampler = "uniform"   # lights play no part
+    light_sampler_type = "uniform"   # lights play no part
 
     def __init__(self, props):
         super().__init__(props)
@@ -38,8 +50,6 @@ class AOIntegrator(SamplingIntegrator):
         props.finish()
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
-        if mode != PRIMAL:
-            raise NotImplementedError(f"{self.name}: gradients are not implemented")
         return self._sample(scene, rng, ray, wl, active)
 
     def _direction(self, u):

@@ -1,31 +1,6 @@
-"""``aov``: arbitrary output variables of the surfaces camera rays see (Mitsuba's ``aov``).
-
-``aovs`` is a comma-separated list of ``name:type`` pairs; nested integrators (any
-number, each under its own key) render radiance alongside. The image is an (H, W, C)
-tensor, in Mitsuba 3.9's channel order: the R, G, B of each nested integrator in the
-order given, then the AOV channels in the order of ``aovs`` (:attr:`AOVIntegrator.channels`
-names them, e.g. ``dd.y.T``, ``nn.X``). Without a nested integrator only the AOVs are
-returned. Every channel is developed with the film's filter, like the radiance, so a
-pixel holds the filter-weighted average over its samples (fractional at edges). The
-scene's light sampler is the first nested integrator's.
-
-Types and conventions (as Mitsuba's, values 0 where the camera ray misses):
-
-* ``depth`` (T): distance along the camera ray from the near plane (``si.t``);
-* ``position`` (X, Y, Z), ``uv`` (U, V), ``geo_normal`` (X, Y, Z), ``dp_du``, ``dp_dv``:
-  the surface interaction's;
-* ``sh_normal`` (X, Y, Z): the shading normal after the BSDF's normal or bump map;
-* ``prim_index`` (I): the primitive (triangle) index;
-* ``shape_index`` (I): 1 + the shape's index in the scene description (0: no hit), as
-  Mitsuba's scalar variants; Mitsuba's JIT variants return a registry id instead;
-* ``albedo`` (R, G, B): a one-sample estimate of the BSDF's directional albedo
-  (the weight f cos / pdf of one BSDF sample, exact for ``diffuse``: its reflectance),
-  developed like radiance, i.e. as Mitsuba treats its ``eval_diffuse_reflectance``
-  spectrum. Mitsuba evaluates the BSDF toward the normal instead, so the two agree for
-  ``diffuse`` only.
-
-Mitsuba's ``duv_dx``/``duv_dy`` need ray differentials, which pbr's camera does not
-produce; they are rejected. AOVs have no gradients.
+"""``aov``: arbitrary output variables of the surfaces camera rays see (Mitsuba's
+``aov``), after the radiance of nested integrators, in Mitsuba 3.9's channel order.
+Types and conventions: docs/integrators.md.
 """
 
 from __future__ import annotations
@@ -46,7 +21,22 @@ AOV_TYPES = {
 
 @INTEGRATORS.register("aov")
 class AOVIntegrator(SamplingIntegrator):
+    """``aov`` (Mitsuba's): arbitrary output variables of the surfaces camera rays see,
+    after the R, G, B of the nested integrators (any number, each under its own key);
+    :attr:`channels` names the channels.
+
+    =========  ======  =======  ========================================================
+    name       type    default  meaning
+    =========  ======  =======  ========================================================
+    aovs       string  ''       comma-separated 'name:type' pairs; types: albedo, depth,
+                                position, uv, geo_normal, sh_normal, dp_du, dp_dv,
+                                prim_index, shape_index
+    (any key)  plugin  -        a nested integrator rendered alongside
+    =========  ======  =======  ========================================================
+    """
+
     name = "aov"
+    light_sampler_type = "uniform"   # the AOVs sample no light; nested integrators use their own
 
     def __init__(self, props):
         super().__init__(props)
@@ -74,21 +64,17 @@ class AOVIntegrator(SamplingIntegrator):
         props.finish()
         if not self.aovs and not self.nested:
             raise props.error("aovs", "no AOV and no nested integrator given")
-        # A scene builds one light sampler: the first nested integrator's (the choice
-        # changes the others' noise, not their expectation).
-        self.light_sampler = self.nested[0][1].light_sampler if self.nested else "uniform"
         self.channels = [f"{key}.{c}" for key, _ in self.nested for c in "RGB"]
         self.channels += [f"{name}.{c}" for name, kind in self.aovs for c in AOV_TYPES[kind]]
 
-    def check(self, scene) -> None:
-        super().check(scene)
+    def prepare(self, scene, sensor: int = 0) -> None:
+        super().prepare(scene, sensor)
         for _, integrator in self.nested:
-            integrator.check(scene)
+            integrator.prepare(scene, sensor)
 
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
         """(H, W, len(channels)) tensor: nested RGB, then AOVs (module docstring)."""
-        for _, integ in self.nested:
-            integ._plan(scene, sensor, spp)   # integrators that prepare per sensor (media)
+        self.prepare(scene, sensor)
 
         def radiance(rng, ray, wl, inside):
             L, extra = mi.Spectrum(0.0), []
@@ -109,7 +95,7 @@ class AOVIntegrator(SamplingIntegrator):
         hit = active & si.is_valid()
         bsdfs = scene.bsdfs
         bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
-        ctx = ShadingContext(si, wl, scene.textures)
+        ctx = ShadingContext(si, wl)
         out = []
         for _, kind in self.aovs:
             if kind == "depth":

@@ -11,7 +11,6 @@ paths (same random numbers) and propagate the adjoint radiance to scene paramete
 
 from __future__ import annotations
 
-import math
 import os
 
 import drjit as dr
@@ -38,13 +37,26 @@ class SamplingIntegrator:
 
     name = ""
     path = "scene.integrator"     # the integrator's key path (for error messages)
-    light_sampler = "power"
+    light_sampler_type = "power"  # the 'light_sampler' parameter: the light sampler of NEE
+    light_sampler = None          # that sampler over the scene being rendered (see prepare)
+    emission_sampler = None       # light paths' light sampler (traces_light_paths; see prepare)
     differentiable = False        # whether render_forward/render_backward are implemented
     surfaces_only = False         # whether participating media are an error
     traces_light_paths = False    # whether every emitter must emit rays (sample_Le), without media
 
     def __init__(self, props):
         self.path = props.path
+
+    def prepare(self, scene, sensor: int = 0) -> None:
+        """Per-render set-up, run by ``render``, ``render_forward`` and ``render_backward``
+        (and by ``Scene.build`` for the scene's own integrator, so that a render inside
+        ``dr.freeze`` builds nothing): check the scene (it may be rendered with an
+        integrator other than its own) and take this integrator's light samplers for the
+        scene's current lights (cached per scene build by ``LightSet.sampler``)."""
+        self.check(scene)
+        self.light_sampler = scene.lights.sampler(self.light_sampler_type)
+        if self.traces_light_paths:
+            self.emission_sampler = scene.lights.sampler("power")
 
     def check(self, scene) -> None:
         """Raise a SceneError naming this integrator's key path where ``scene`` holds
@@ -127,6 +139,7 @@ class SamplingIntegrator:
 
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
         """Primal image: ``mi.TensorXf`` (H, W, 3), linear sRGB."""
+        self.prepare(scene, sensor)
         def radiance(rng, ray, wl, inside):
             return self.sample(scene, rng, ray, wl, PRIMAL, None, None, inside)[0]
         return self._film(scene, sensor, seed, spp, radiance, progress)
@@ -141,6 +154,7 @@ class SamplingIntegrator:
     def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0):
         """Propagate the image adjoint ``grad_img`` (H, W, 3) to the scene parameters."""
         self._require_differentiable()
+        self.prepare(scene, sensor)
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
         pixel_w = self._pixel_weights(scene, sensor, seed, spp)
         g = grad_img.array if isinstance(grad_img, mi.TensorXf) else mi.Float(np.asarray(grad_img, np.float32).ravel())
@@ -160,6 +174,7 @@ class SamplingIntegrator:
     def render_forward(self, scene, sensor=0, seed=0, spp=0):
         """Forward-mode derivative of the image w.r.t. the gradients set on parameters."""
         self._require_differentiable()
+        self.prepare(scene, sensor)
         def radiance_derivative(rng, ray, wl, inside):
             state = _snapshot(rng)
             L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
@@ -202,18 +217,19 @@ def mis_state(ray):
     return mi.Point3f(ray.o), mi.Normal3f(0.0), mi.Float(1.0), mi.Bool(True)
 
 
-def emitted_mis(scene, light, si, d, wl, on_light, escaped, prev_p, prev_n, prev_pdf, prev_delta):
+def emitted_mis(scene, sampler, light, si, d, wl, on_light, escaped, prev_p, prev_n, prev_pdf, prev_delta):
     """Radiance a path finds by BSDF (or phase) sampling: the area light ``light - 1``
     at ``si`` on ``on_light`` lanes, the infinite lights along ``d`` on ``escaped`` lanes,
-    each weighted by the power heuristic against light sampling from the previous vertex
-    (weight 1 after a delta vertex). Throughput not included."""
+    each weighted by the power heuristic against light sampling (with light sampler
+    ``sampler``) from the previous vertex (weight 1 after a delta vertex). Throughput not
+    included."""
     lights = scene.lights
     Le = lights.L(light - 1, si, wl, on_light)
-    pdf_light = lights.pdf_Li(light - 1, prev_p, prev_n, si, on_light & ~prev_delta)
+    pdf_light = lights.pdf_Li(sampler, light - 1, prev_p, prev_n, si, on_light & ~prev_delta)
     w_hit = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_light))
     Le = dr.select(on_light, Le * w_hit, 0.0)
     if lights.has_infinite:
-        for Le_inf, pdf_inf in lights.Le_escaped(d, wl, prev_p, prev_n, escaped):
+        for Le_inf, pdf_inf in lights.Le_escaped(d, wl, prev_p, prev_n, escaped, sampler):
             w_inf = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_inf))
             Le += dr.select(escaped, Le_inf * w_inf, 0.0)
     return Le
@@ -270,10 +286,11 @@ def _progress(n_pass, progress):
     return tqdm(total=n_pass, desc="pbr render", unit="pass", leave=False)
 
 
-def mis_depth_limit(max_depth: int):
-    """Mitsuba's max_depth: -1 = unlimited; otherwise paths have at most max_depth - 1
-    bounces after the camera ray (max_depth = 1 shows only directly visible emitters)."""
-    return math.inf if max_depth < 0 else max_depth
+def depth_limit(max_depth: int) -> int:
+    """Mitsuba's ``max_depth`` as a bound on a path's vertex count in a kernel: -1
+    (unlimited) becomes 2^32 - 1; otherwise paths have at most max_depth - 1 bounces
+    after the camera ray (max_depth = 1 shows only directly visible emitters)."""
+    return max_depth if max_depth >= 0 else 0xFFFFFFFF
 
 
 def pbrt_max_depth(props, default: int = 5) -> int:

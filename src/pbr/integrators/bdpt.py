@@ -1,48 +1,7 @@
 """``bdpt``: bidirectional path tracing with MIS over all strategies (pbrt-v4's
-``BDPTIntegrator``; Mitsuba has none).
-
-Each camera sample traces a *light subpath* y_0 .. y_{nL-1} (y_0 on a light, picked in
-proportion to power) and a *camera subpath* z_0 .. z_{nC-1} (z_0 the pinhole), and
-evaluates every strategy (s, t) that joins the first s light vertices to the first t
-camera vertices into a path of depth s + t - 2 <= ``maxdepth``:
-
-* s = 0: the camera subpath hits an emitter (or escapes to an infinite light);
-* s = 1: next-event estimation at z_{t-1} (a fresh light sample, as pbrt-v4);
-* t = 1: the light vertex y_{s-1} is connected to the pinhole and splatted on the film;
-* s, t >= 2: y_{s-1} and z_{t-1} are joined by a shadow ray.
-
-The MIS weight is pbrt-v4's balance heuristic over all strategies of a path, with its
-conventions: densities of each vertex in area measure (solid angle for infinite lights),
-``pdfFwd`` in the direction the subpath was generated, ``pdfRev`` the other way,
-Dirac-delta densities remapped to 1 (``remap0``) and strategies that would connect
-through a specular vertex or a delta light left out. pbrt-v4 loops over the whole path
-for each strategy; here the sums are kept along each subpath as it is generated:
-
-    E_k = [not delta_k and not delta_{k-1}] + r_{k-1} E_{k-1},    r_k = pdfRev_k / pdfFwd_k
-
-(:func:`advance_sum`; E_0 = 0 on the camera side, [not a delta light] on the light side),
-so that a strategy only corrects the last two ratios of each side (those its connection
-changes, :func:`side_sum`) and needs only its end vertices and their predecessors.
-This equals pbrt-v4's ``MISWeight`` term by term (tested against a transcription).
-
-Vectorisation: a render pass runs two kernels. The light subpaths are generated first
-(a symbolic loop that also evaluates and splats the t = 1 strategies) and stored, one
-record per vertex, in arrays of width ``samples * (maxdepth + 1)``. The camera
-subpaths follow (a symbolic loop that evaluates s = 0 and s = 1 at each vertex and,
-in a nested loop, connects it to each stored light vertex). A stored vertex keeps the
-ray that found it; the surface interaction is recovered by tracing that ray again.
-
-Conventions: ``maxdepth`` is pbrt-v4's (the number of bounces: 0 shows emitters seen
-directly, 1 adds direct lighting; default 5); ``max_depth`` is Mitsuba's and may be
-given instead: max_depth = maxdepth + 1 (0 renders black; -1, unlimited, is rejected:
-BDPT's strategies need a bound). No Russian roulette (as pbrt-v4). Importance
-transport along light subpaths uses the adjoint BSDF and Veach's shading-normal factor
-(:mod:`pbr.integrators.lightpath`). Light selection for light subpaths and next-event
-estimation is proportional to power (pbrt-v4's choice for BDPT). Not supported:
-``regularize`` (pbrt-v4's BSDF regularisation; only ``false`` is accepted),
-participating media, derivatives, Mitsuba's ``hide_emitters``.
-``visualizestrategies``/``visualizeweights`` (pbrt-v4 writes one image per strategy):
-:meth:`BDPTIntegrator.render_strategies` returns those images instead.
+``BDPTIntegrator``). Light subpaths are generated and stored first (splatting the t = 1
+strategies), then camera subpaths connect to them; MIS sums are kept along each subpath.
+The strategies, the MIS recurrence and the vectorisation: docs/integrators.md.
 """
 
 from __future__ import annotations
@@ -55,7 +14,7 @@ from ..bsdfs.base import ShadingContext
 from ..lights.directional import DirectionalLight
 from ..lights.directionalarea import DirectionalAreaLight
 from ..spectrum import first_only
-from .base import INTEGRATORS, PRIMAL
+from .base import INTEGRATORS
 from .lightpath import (LightTracingIntegrator, connect_to_camera, eval_importance,
                         sample_importance, shading_correction, start_light_path)
 
@@ -142,22 +101,37 @@ def light_kinds(lights) -> mi.UInt32:
     return dr.gather(mi.UInt32, mi.UInt32(fam), lights.family_of)
 
 
-def infinite_density(lights, wi, active):
+def infinite_density(lights, sampler, wi, active):
     """pbrt-v4's ``InfiniteLightDensity``: the density (solid angle, light pick of
-    ``sample_Le`` included) of direction ``wi`` toward the infinite lights, summed."""
+    ``sample_Le`` with ``sampler`` included) of direction ``wi`` toward the infinite
+    lights, summed."""
     pdf = mi.Float(0.0)
     for g in lights.infinite_ids:
         t, i = lights.entries[g]
         light = mi.UInt32(int(lights.first_light[g]))
-        pdf += lights.families[t].pdf_Le_dir(mi.UInt32(i), wi, active) * lights.pmf_Le(light, active)
+        pdf += lights.families[t].pdf_Le_dir(mi.UInt32(i), wi, active) * lights.pmf_Le(sampler, light, active)
     return pdf
 
 
 @INTEGRATORS.register("bdpt")
 class BDPTIntegrator(LightTracingIntegrator):
+    """``bdpt``: bidirectional path tracing with MIS over all strategies (pbrt-v4's
+    ``BDPTIntegrator``); lights picked by power. No participating media, no derivatives.
+
+    ===================  ====  =======  ========================================================
+    name                 type  default  meaning
+    ===================  ====  =======  ========================================================
+    maxdepth             int   5        pbrt-v4's bounces (0: emitters seen directly)
+    max_depth            int   -        Mitsuba's depth instead (= maxdepth + 1; finite)
+    regularize           bool  false    pbrt-v4's BSDF regularisation (only false)
+    visualizestrategies  bool  false    render_strategies() returns unweighted strategy images
+    visualizeweights     bool  false    render_strategies() returns MIS-weighted strategy images
+    ===================  ====  =======  ========================================================
+    """
+
     name = "bdpt"
     traces_light_paths = True
-    light_sampler = "power"
+    light_sampler_type = "power"
 
     def __init__(self, props):
         super().__init__(props)
@@ -219,8 +193,6 @@ class BDPTIntegrator(LightTracingIntegrator):
         return dr.select((s == self._only[0]) & (t == self._only[1]), w, 0.0)
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
-        if mode != PRIMAL:
-            raise NotImplementedError("bdpt: derivatives are not supported (primal only)")
         if self.max_depth == 0:
             return mi.Spectrum(0.0), mi.Bool(False)
         n = dr.width(rng.state)
@@ -239,11 +211,11 @@ class BDPTIntegrator(LightTracingIntegrator):
         n = dr.width(n_light)
         lane = dr.arange(mi.UInt32, n)
         md = self.maxdepth
-        les, ray, beta = start_light_path(scene, rng, wl, mi.Bool(True))
+        les, ray, beta = start_light_path(scene, self.emission_sampler, rng, wl, mi.Bool(True))
         ok = les.pdf_dir > 0
         inf0 = les.infinite | les.delta_dir
         n0 = dr.select(inf0 | les.delta_pos, mi.Normal3f(0.0), les.n)
-        fwd0 = dr.select(inf0, infinite_density(lights, -les.d, ok), les.pmf * les.pdf_pos)
+        fwd0 = dr.select(inf0, infinite_density(lights, self.emission_sampler, -les.d, ok), les.pmf * les.pdf_pos)
         E0 = dr.select(les.delta_pos | les.delta_dir, 0.0, 1.0)
         flags0 = dr.select(inf0, mi.UInt32(INFINITE), mi.UInt32(0))
         dr.scatter(store, LightVertex(les.o, les.d, les.o, n0, les.L, fwd0, E0, flags0), lane, ok)
@@ -269,7 +241,7 @@ class BDPTIntegrator(LightTracingIntegrator):
             # Forward density of y_k; after an infinite light, its disk's density (pbrt-v4).
             fwd = dr.select(prev_inf, pdf_pos0 * cos_k, to_area(pdf_dir, prev_p, si.p, si.n))
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
-            ctx = ShadingContext(si, wl, scene.textures)
+            ctx = ShadingContext(si, wl)
             conn = hit & bsdfs.smooth(bsdf_id, hit)
 
             # t = 1: connect y_k to the pinhole (strategy s = k + 1, depth k).
@@ -352,7 +324,7 @@ class BDPTIntegrator(LightTracingIntegrator):
                 on_light = hit & (light > 0)
                 Le = lights.L(light - 1, si, wl, on_light)
                 pdf_pos, pdf_e = lights.pdf_Le(light - 1, si.p, si.sh_frame.n, -ray.d, on_light)
-                rev_k = lights.pmf_Le(light - 1, on_light) * pdf_pos
+                rev_k = lights.pmf_Le(self.emission_sampler, light - 1, on_light) * pdf_pos
                 rev_km1 = to_area(pdf_e, si.p, prev_p, prev_n)
                 w = dr.select(k == 1, 1.0, mis_weight(side_sum(rev_k, fwd, rev_km1, prev_fwd, prev_delta, prev_E), 0.0))
                 Lk += dr.select(on_light, beta * Le * self._keep(0, k + 1, w), 0.0)
@@ -361,7 +333,7 @@ class BDPTIntegrator(LightTracingIntegrator):
                     Le_inf = mi.Spectrum(0.0)
                     for Le_i, _ in lights.Le_escaped(ray.d, wl, prev_p, prev_n, escaped):
                         Le_inf += Le_i
-                    rev_k = infinite_density(lights, ray.d, escaped)
+                    rev_k = infinite_density(lights, self.emission_sampler, ray.d, escaped)
                     # The escaped vertex's forward density stays per solid angle (pbrt-v4).
                     rev_km1 = self._planar_density(lights, escaped) * dr.select(
                         dr.squared_norm(prev_n) > 0, dr.abs(dr.dot(prev_n, ray.d)), 1.0)
@@ -370,7 +342,7 @@ class BDPTIntegrator(LightTracingIntegrator):
                     Lk += dr.select(escaped, beta * Le_inf * self._keep(0, k + 1, w), 0.0)
 
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
-            ctx = ShadingContext(si, wl, scene.textures)
+            ctx = ShadingContext(si, wl)
             conn = hit & bsdfs.smooth(bsdf_id, hit)
 
             # s = 1: next-event estimation (depth k).
@@ -382,7 +354,7 @@ class BDPTIntegrator(LightTracingIntegrator):
             nee = conn & (k <= md)
             wo_l = mi.Vector3f(0, 0, 1)
             if dr.hint(has_lights, mode="scalar"):   # a Python branch: both share variables
-                lt, pmf = lights.sampler.sample(u_light, si.p, si.n, nee)
+                lt, pmf = self.light_sampler.sample(u_light, si.p, si.n, nee)
                 lt = mi.UInt32(lt)
                 ls = lights.sample_Li_light(lt, si, u_pos, wl, nee)
                 em = nee & (ls.pdf > 0) & (pmf > 0)
@@ -409,8 +381,8 @@ class BDPTIntegrator(LightTracingIntegrator):
             bs = dr.detach(bs)
             if dr.hint(has_lights, mode="scalar"):
                 pdf_pos, pdf_e = lights.pdf_Le(lt, ls.p, ns_l, -ls.wi, em)
-                fwd_l = dr.select(inf_l, infinite_density(lights, ls.wi, em & inf_l),
-                                  lights.pmf_Le(lt, em) * pdf_pos)
+                fwd_l = dr.select(inf_l, infinite_density(lights, self.emission_sampler, ls.wi, em & inf_l),
+                                  lights.pmf_Le(self.emission_sampler, lt, em) * pdf_pos)
                 rev_l = to_area(pdf_l, si.p, ls.p, ng_l, inf_l)
                 cos_k = dr.abs(dr.dot(si.n, ls.wi))
                 rev_k = dr.select(inf_l, pdf_pos * cos_k, pdf_e * cos_k / dr.square(dist))
@@ -438,7 +410,7 @@ class BDPTIntegrator(LightTracingIntegrator):
                 dn = dv * dr.rsqrt(d2)
                 ok &= d2 > 0
                 ok &= geo.unoccluded(si, q.p, ok)
-                ctx_q = ShadingContext(si_q, wl, scene.textures)
+                ctx_q = ShadingContext(si_q, wl)
                 wo_t = si.to_local(dn)
                 wo_q = si_q.to_local(-dn)
                 f_t, pdf_t = bsdfs.eval_pdf(bsdf_id, ctx, wo_t, ok)

@@ -25,7 +25,7 @@ from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
 from ..spectrum import first_only
-from .base import INTEGRATORS, SamplingIntegrator, PRIMAL
+from .base import INTEGRATORS, SamplingIntegrator
 
 
 @dr.syntax
@@ -55,6 +55,22 @@ def hit_emission(scene, si, shape, wl, active):
 
 @INTEGRATORS.register("direct")
 class DirectIntegrator(SamplingIntegrator):
+    """``direct`` (Mitsuba's): direct illumination only, light and BSDF samples combined by
+    multi-sample MIS. Surfaces only.
+
+    ===============  ======  =======  ==========================================================
+    name             type    default  meaning
+    ===============  ======  =======  ==========================================================
+    shading_samples  int     1        sets both sample counts below
+    emitter_samples  int     1        light samples per camera sample (default: shading_samples)
+    bsdf_samples     int     1        BSDF samples per camera sample (default: shading_samples)
+    hide_emitters    bool    false    camera rays pass through emitting surfaces and do not see
+                                      the environment
+    light_sampler    string  bvh      light choice of next-event estimation: 'uniform', 'power'
+                                      or 'bvh' (pbrt-v4's light BVH)
+    ===============  ======  =======  ==========================================================
+    """
+
     name = "direct"
     surfaces_only = True
 
@@ -69,12 +85,10 @@ class DirectIntegrator(SamplingIntegrator):
             raise props.error("emitter_samples" if props.has("emitter_samples") else "shading_samples",
                               "at least one emitter or BSDF sample is needed")
         self.hide_emitters = props.bool("hide_emitters", False)
-        self.light_sampler = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
+        self.light_sampler_type = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
         props.finish()
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
-        if mode != PRIMAL:
-            raise NotImplementedError("direct: gradients are not implemented (use 'path')")
         return self._sample(scene, rng, ray, wl, active)
 
     @dr.syntax
@@ -95,7 +109,7 @@ class DirectIntegrator(SamplingIntegrator):
                 for Le_inf, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), active & ~hit):
                     L += Le_inf
 
-        ctx = ShadingContext(si, wl, scene.textures)
+        ctx = ShadingContext(si, wl)
         bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
 
         # Light sampling (only where the BSDF has a smooth lobe).
@@ -104,7 +118,7 @@ class DirectIntegrator(SamplingIntegrator):
         while dr.hint(smooth & (i < n_em), label="direct_emitter"):
             u_light = rng.next_float32()
             u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
-            ls = lights.sample_Li(si, u_light, u_pos, wl, smooth)
+            ls = lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl, smooth)
             em = smooth & (ls.pdf > 0)
             em &= geo.unoccluded(si, ls.p, em)
             f, pdf_b = bsdfs.eval_pdf(bsdf_id, ctx, si.to_local(ls.wi), em)
@@ -123,12 +137,12 @@ class DirectIntegrator(SamplingIntegrator):
             si_b, shape_b = geo.intersect(ray_b, go)
             Le, light = hit_emission(scene, si_b, shape_b, wl, go)
             on = go & (light > 0)
-            pdf_e = lights.pdf_Li(light - 1, si.p, si.n, si_b, on & ~bs.delta)
+            pdf_e = lights.pdf_Li(self.light_sampler, light - 1, si.p, si.n, si_b, on & ~bs.delta)
             w = power_heuristic(bs.pdf * frac_bs, dr.select(bs.delta, 0.0, pdf_e) * frac_em)
             Lb = dr.select(on, Le * w, 0.0)
             if infinite:
                 esc = go & ~si_b.is_valid()
-                for Le_inf, pdf_inf in lights.Le_escaped(ray_b.d, wl, si.p, si.n, esc):
+                for Le_inf, pdf_inf in lights.Le_escaped(ray_b.d, wl, si.p, si.n, esc, self.light_sampler):
                     w_inf = power_heuristic(bs.pdf * frac_bs, dr.select(bs.delta, 0.0, pdf_inf) * frac_em)
                     Lb += dr.select(esc, Le_inf * w_inf, 0.0)
             Lb = bs.weight * Lb * inv_bs

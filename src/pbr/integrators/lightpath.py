@@ -98,8 +98,9 @@ class LightTracingIntegrator(SamplingIntegrator):
     ``self.camera`` the sensor being rendered): ``render`` = the camera-sample image plus
     the splatted image over ``spp``. Primal only."""
 
+    traces_light_paths = True
+
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
-        scene.lights.prepare_emission(scene)
         cam, w, h, spp, _, _ = self._plan(scene, sensor, spp)
         self.camera = cam
         self.splats = SplatFilm(cam)
@@ -109,12 +110,6 @@ class LightTracingIntegrator(SamplingIntegrator):
         finally:
             self.splats = None
         return mi.TensorXf(img.astype(np.float32))
-
-    def render_forward(self, scene, sensor=0, seed=0, spp=0):
-        raise NotImplementedError(f"{self.name}: derivatives are not supported (primal only)")
-
-    def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0):
-        raise NotImplementedError(f"{self.name}: derivatives are not supported (primal only)")
 
 
 # ----------------------------------------------------------------- importance transport
@@ -171,14 +166,14 @@ def spawn_from(p, n, d):
     return mi.Ray3f(p + off, d)
 
 
-def start_light_path(scene, rng, wl, active):
-    """Pick a light and sample a ray leaving it (4 random numbers): (``LeSample``, the
+def start_light_path(scene, sampler, rng, wl, active):
+    """Pick a light with ``sampler`` and sample a ray leaving it (4 random numbers): (``LeSample``, the
     ray, the initial throughput ``beta``: the sample's weight, W/m^2/sr-free units such
     that the expected sum of contributions reaching the film equals the image)."""
     u_light = rng.next_float32()
     u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
     u_dir = mi.Point2f(rng.next_float32(), rng.next_float32())
-    ls = scene.lights.sample_Le(u_light, u_pos, u_dir, wl, active)
+    ls = scene.lights.sample_Le(sampler, u_light, u_pos, u_dir, wl, active)
     ray = spawn_from(ls.o, ls.n, ls.d)
     return ls, ray, mi.Spectrum(ls.weight)
 
@@ -193,7 +188,7 @@ def connect_to_camera(scene, camera, si, bsdf_id, wl, beta, active):
     ok = active & cs.valid
     ok &= scene.geometry.unoccluded(si, cs.p, ok)
     wo_local = si.to_local(cs.wi)
-    ctx = ShadingContext(si, wl, scene.textures)
+    ctx = ShadingContext(si, wl)
     f, _ = eval_importance(scene.bsdfs, bsdf_id, ctx, wo_local, ok)
     corr, side_ok = shading_correction(si, si.to_world(si.wi), cs.wi)
     ok &= side_ok & (cs.pdf > 0)

@@ -21,11 +21,28 @@ from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
 from ..spectrum import first_only
-from .base import INTEGRATORS, SamplingIntegrator, PRIMAL, BACKWARD, emitted_mis, forward_derivative
+from .base import (INTEGRATORS, BACKWARD, PRIMAL, SamplingIntegrator, depth_limit, emitted_mis, forward_derivative,
+                   mis_state, path_state)
 
 
 @INTEGRATORS.register("path")
 class PathIntegrator(SamplingIntegrator):
+    """``path``: unidirectional path tracing with next-event estimation and MIS
+    (pbrt-v4's ``PathIntegrator``, Mitsuba's ``path``); its adjoint passes are PRB.
+
+    =============  ======  =======  =============================================================
+    name           type    default  meaning
+    =============  ======  =======  =============================================================
+    max_depth      int     -1       longest path in segments (Mitsuba's: -1 unlimited, 1 emitters
+                                    seen directly, 2 direct light)
+    rr_depth       int     5        depth from which Russian roulette may end a path
+    hide_emitters  bool    false    camera rays pass through emitting surfaces and do not see
+                                    the environment
+    light_sampler  string  bvh      light choice of next-event estimation: 'uniform', 'power'
+                                    or 'bvh' (pbrt-v4's light BVH)
+    =============  ======  =======  =============================================================
+    """
+
     name = "path"
     default_max_depth = -1
     differentiable = True
@@ -35,7 +52,7 @@ class PathIntegrator(SamplingIntegrator):
         self.max_depth = props.int("max_depth", self.default_max_depth, min=-1)
         self.rr_depth = props.int("rr_depth", 5, min=0)
         self.hide_emitters = props.bool("hide_emitters", False)
-        self.light_sampler = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
+        self.light_sampler_type = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
         props.finish()
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
@@ -46,23 +63,15 @@ class PathIntegrator(SamplingIntegrator):
     @dr.syntax
     def _sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
         primal = mode == PRIMAL
-        geo, lights, bsdfs, tex = scene.geometry, scene.lights, scene.bsdfs, scene.textures
-        max_depth = self.max_depth if self.max_depth >= 0 else 0xFFFFFFFF
+        geo, lights, bsdfs = scene.geometry, scene.lights, scene.bsdfs
+        max_depth = depth_limit(self.max_depth)
 
-        L = mi.Spectrum(0.0) if primal else mi.Spectrum(L_in)
+        ray, active, L, beta, depth, valid = path_state(ray, active, None if primal else L_in)
+        prev_p, prev_n, prev_pdf, prev_delta = mis_state(ray)
         dL_fwd = mi.Spectrum(0.0)
-        beta = mi.Spectrum(1.0)
         eta = mi.Float(1.0)
-        depth = mi.UInt32(0)
-        prev_p = mi.Point3f(ray.o)
-        prev_n = mi.Normal3f(0.0)
-        prev_pdf = mi.Float(1.0)
-        prev_delta = mi.Bool(True)
-        valid = mi.Bool(False)
         terminated = mi.Bool(False)
         dispersive = bsdfs.dispersive
-        active = mi.Bool(active)
-        ray = mi.Ray3f(ray)
 
         while dr.hint(active, label="path"):
             si, shape = geo.intersect(ray, active)
@@ -80,11 +89,11 @@ class PathIntegrator(SamplingIntegrator):
             if self.hide_emitters:
                 escaped &= depth > 0
             with dr.resume_grad(when=not primal):
-                Le = beta * emitted_mis(scene, light, si, ray.d, wl, on_light, escaped,
+                Le = beta * emitted_mis(scene, self.light_sampler, light, si, ray.d, wl, on_light, escaped,
                                         prev_p, prev_n, prev_pdf, prev_delta)
 
             active_next = hit & ~skip & (depth + 1 < max_depth)
-            ctx = ShadingContext(si, wl, tex)
+            ctx = ShadingContext(si, wl)
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, active_next)
 
             # Next-event estimation: one light sample, MIS-weighted against the BSDF.
@@ -93,7 +102,7 @@ class PathIntegrator(SamplingIntegrator):
             smooth = active_next & bsdfs.smooth(bsdf_id, active_next)
             with dr.resume_grad(when=not primal):
                 # Attached: the sampled radiance ls.L depends on emitter parameters.
-                ls = lights.sample_Li(si, u_light, u_pos, wl, smooth)
+                ls = lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl, smooth)
             ls.pdf = dr.detach(ls.pdf)
             em = smooth & (ls.pdf > 0)
             em &= geo.unoccluded(si, ls.p, em)
@@ -167,8 +176,9 @@ class PathIntegrator(SamplingIntegrator):
 
 @INTEGRATORS.register("prb")
 class PRBIntegrator(PathIntegrator):
-    """``prb`` (Mitsuba's name): the same estimator, whose adjoint passes are Path Replay
-    Backpropagation; Mitsuba's default ``max_depth`` of 6."""
+    """``prb`` (Mitsuba's name): ``path``'s estimator and parameters, with Mitsuba's
+    default ``max_depth`` of 6; the adjoint passes are Path Replay Backpropagation.
+    """
 
     name = "prb"
     default_max_depth = 6

@@ -1,28 +1,7 @@
-"""``prbvolpath``: differentiable volumetric path tracing (Path Replay Backpropagation
-through participating media, Mitsuba's ``prbvolpath`` estimator, Vicini et al. 2021).
-
-The primal estimator: free flights are sampled against the majorant with the first
-(hero) wavelength; at a tentative collision the event is *real* with probability
-``P = mean(sigma_t / sigma_maj)`` and *null* otherwise; a real event scatters with the
-weight ``sigma_s / (sigma_maj P)`` (absorption is a weight, not a termination) and a null
-event continues with ``sigma_n / (sigma_maj (1 - P))``. Next-event estimation to one
-light sample, MIS (power heuristic) against BSDF and phase sampling; shadow rays take the
-exact transmittance through homogeneous media and ratio tracking through grids.
-
-Derivatives (``FORWARD``/``BACKWARD``) replay the same path: every factor ``w`` that
-multiplies the throughput is recomputed *attached* to the scene parameters and
-``dL * L_rest * w / detach(w)`` is propagated, where ``L_rest`` is the radiance the path
-still collects after that factor; emitted and directly received radiance are
-propagated where they are added. Sampling is detached: distances, events and directions
-do not move with the parameters. So that null collisions carry the derivative of the
-transmittance, grid majorants are inflated by ``majorant_factor`` (Mitsuba's media use
-1.01; without it, regions where the majorant equals sigma_t never produce null
-collisions and the transmittance derivative there is lost). Homogeneous media use the
-attached ``exp(-sigma_t t)`` directly (their majorant is sigma_t).
-
-Compared with ``volpath`` (the fast primal estimator, pbrt-v4's spectral MIS), this one
-tracks the hero wavelength only, as Mitsuba's spectral ``prbvolpath`` does, so chromatic
-media are noisier. Not supported: emissive media (``Le``).
+"""``prbvolpath``: differentiable volumetric path tracing (Mitsuba's ``prbvolpath``
+estimator, Path Replay Backpropagation through participating media, Vicini et al. 2021)
+on the shared volumetric walk (:mod:`.volume`). The estimator and how its derivatives
+are propagated: docs/integrators.md.
 """
 
 from __future__ import annotations
@@ -36,7 +15,8 @@ from ..plugins.props import SceneError
 from ..sampling import power_heuristic
 from ..spectrum import first_only
 from . import volume
-from .base import INTEGRATORS, PRIMAL, BACKWARD, emitted_mis, forward_derivative, mis_state, path_state
+from .base import (INTEGRATORS, BACKWARD, PRIMAL, depth_limit, emitted_mis, forward_derivative, mis_state,
+                   path_state)
 from .volpath import _MediumAware
 
 
@@ -48,6 +28,25 @@ def _ratio(w):
 
 @INTEGRATORS.register("prbvolpath")
 class PRBVolPathIntegrator(_MediumAware):
+    """``prbvolpath``: differentiable volumetric path tracing (Mitsuba's ``prbvolpath``
+    estimator, Path Replay Backpropagation through media; hero wavelength only). No
+    emissive media.
+
+    ===================  ======  =======  =========================================================
+    name                 type    default  meaning
+    ===================  ======  =======  =========================================================
+    max_depth            int     6        longest path in real scattering events (-1 unlimited)
+    rr_depth             int     5        depth from which Russian roulette may end a path
+    hide_emitters        bool    false    camera rays pass through emitting surfaces and do not see
+                                          the environment
+    light_sampler        string  bvh      light choice of next-event estimation: 'uniform', 'power'
+                                          or 'bvh' (pbrt-v4's light BVH)
+    majorant_factor      float   1.1      grid majorants are multiplied by it (>= 1), so that null
+                                          collisions carry the transmittance's derivative
+    max_null_collisions  int     65536    null collisions a path segment or shadow ray may have
+    ===================  ======  =======  =========================================================
+    """
+
     name = "prbvolpath"
     differentiable = True
 
@@ -56,7 +55,7 @@ class PRBVolPathIntegrator(_MediumAware):
         self.max_depth = props.int("max_depth", 6, min=-1)
         self.rr_depth = props.int("rr_depth", 5, min=0)
         self.hide_emitters = props.bool("hide_emitters", False)
-        self.light_sampler = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
+        self.light_sampler_type = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
         self.majorant_factor = props.float("majorant_factor", 1.1, min=1.0)
         self.max_null = props.int("max_null_collisions", 1 << 16, min=1)
         props.finish()
@@ -175,17 +174,18 @@ class PRBVolPathIntegrator(_MediumAware):
 
     def _transmittance(self, scene, rng, sray, p_light, medium, wl, mode, dL, adj, dL_fwd, active):
         """(transmittance from ``sray.o`` to ``p_light``, forward derivative)."""
-        T, _, dL_fwd = volume.transmittance(scene, sray, p_light, medium, active, (mi.Spectrum(1.0), mi.UInt32(0), dL_fwd),
-                                            self._shadow_segment, (scene.media, wl, rng, mode, dL, adj))
+        state = (mi.Spectrum(1.0), mi.UInt32(0), dL_fwd)
+        T, _, dL_fwd = volume.transmittance(scene, sray, p_light, medium, active, state, self._shadow_segment,
+                                            (scene.media, wl, rng, mode, dL, adj))
         return T, dL_fwd
 
     # -- the estimator --------------------------------------------------------------------
     @dr.syntax
     def _sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
-        geo, lights, bsdfs, tex, media = scene.geometry, scene.lights, scene.bsdfs, scene.textures, scene.media
+        geo, lights, bsdfs, media = scene.geometry, scene.lights, scene.bsdfs, scene.media
         primal = mode == PRIMAL
         has_media = len(media) > 0
-        max_depth = self.max_depth if self.max_depth >= 0 else 0xFFFFFFFF
+        max_depth = depth_limit(self.max_depth)
 
         ray, active, L, beta, depth, valid = path_state(ray, active, None if primal else L_in)
         prev_p, prev_n, prev_pdf, prev_delta = mis_state(ray)
@@ -222,7 +222,7 @@ class PRBVolPathIntegrator(_MediumAware):
             if self.hide_emitters:
                 escaped &= depth > 0
             with dr.resume_grad(when=not primal):
-                Le = beta * emitted_mis(scene, light, si, ray.d, wl, on_light, escaped,
+                Le = beta * emitted_mis(scene, self.light_sampler, light, si, ray.d, wl, on_light, escaped,
                                         prev_p, prev_n, prev_pdf, prev_delta)
             if primal:
                 L = L + Le
@@ -235,7 +235,7 @@ class PRBVolPathIntegrator(_MediumAware):
             valid |= at_vertex
 
             # -- next-event estimation ---------------------------------------------------------
-            ctx = ShadingContext(si, wl, tex)
+            ctx = ShadingContext(si, wl)
             nee = (rs & bsdfs.smooth(bsdf_id, rs)) | sc
             ref = volume.nee_reference(si, sc, p_sc)
             u_light = rng.next_float32()
@@ -243,7 +243,7 @@ class PRBVolPathIntegrator(_MediumAware):
             u1 = rng.next_float32()
             u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
             with dr.resume_grad(when=not primal):
-                ls = lights.sample_Li(ref, u_light, u_pos, wl, nee)
+                ls = lights.sample_Li(self.light_sampler, ref, u_light, u_pos, wl, nee)
                 wo_em = si.to_local(ls.wi)
                 f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs)
                 if has_media:

@@ -1,24 +1,6 @@
-"""``ptracer`` (Mitsuba's particle tracer; pbrt-v4's ``lightpath``): light tracing.
-
-``W H spp`` light paths (as Mitsuba): a light is picked in proportion to its power, a
-ray leaves it (``LightSet.sample_Le``) and scatters by BSDF sampling with the
-importance-transport BSDF; every surface vertex is connected to the pinhole
-(``sample_Wi``, a shadow ray) and its contribution is splatted onto the film with the
-reconstruction filter (:class:`pbr.integrators.lightpath.SplatFilm`; the image is the
-sum of splats over ``spp``). Emitters seen directly cannot be reached that way: each
-sample also traces a camera ray through a uniform point of its pixel and splats the
-emitted radiance it sees at that point (Mitsuba connects a point sampled on an emitter
-to the camera instead; both estimate the same splatted image, this one with far less
-noise on large emitters and environment maps).
-
-Mitsuba's conventions: ``max_depth`` (-1: unlimited; 1: only the emitters seen directly;
-2: direct lighting; a light path of ``k`` segments before its camera connection counts
-``k + 1``), ``rr_depth`` (Russian roulette once a light path has more than ``rr_depth``
-segments, survival ``min(max(beta) eta^2, 0.95)``), ``hide_emitters`` (emitters seen
-directly are left out; they still block light, unlike ``path``'s hide_emitters, as in
-Mitsuba's ptracer), ``samples_per_pass``. Surfaces seen through a specular (delta) BSDF
-only are black: a connection through a delta lobe has zero value, and camera paths are
-never extended. No participating media.
+"""``ptracer`` (Mitsuba's particle tracer; pbrt-v4's ``lightpath``): light tracing, every
+surface vertex of a light path connected to the pinhole and splatted on the film
+(:class:`pbr.integrators.lightpath.SplatFilm`). Conventions: docs/integrators.md.
 """
 
 from __future__ import annotations
@@ -38,6 +20,21 @@ from .lightpath import (SplatFilm, connect_to_camera, sample_importance, shading
 
 @INTEGRATORS.register("ptracer", "lightpath")
 class ParticleTracerIntegrator(SamplingIntegrator):
+    """``ptracer`` / ``lightpath`` (Mitsuba's particle tracer, pbrt-v4's light path
+    integrator): ``W H spp`` light paths, every surface vertex connected to the pinhole
+    and splatted on the film. No participating media.
+
+    ================  ====  =======  ===============================================================
+    name              type  default  meaning
+    ================  ====  =======  ===============================================================
+    max_depth         int   -1       Mitsuba's meaning (a light path of k segments before its camera
+                                     connection counts k + 1; -1 unlimited)
+    rr_depth          int   5        depth from which Russian roulette may end a path
+    hide_emitters     bool  false    emitters seen directly are left out (they still block light)
+    samples_per_pass  int   -1       camera samples per pixel and pass (-1: automatic); divides spp
+    ================  ====  =======  ===============================================================
+    """
+
     name = "ptracer"
     traces_light_paths = True
 
@@ -64,7 +61,7 @@ class ParticleTracerIntegrator(SamplingIntegrator):
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
         """``W H spp`` samples, pass by pass; each splats the emitter its camera ray sees
         and the camera connections of one light path. Image: the splats over ``spp``."""
-        scene.lights.prepare_emission(scene)
+        self.prepare(scene, sensor)
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
         self.camera, self.splats = cam, SplatFilm(cam)
         bar = _progress(n_pass, progress)
@@ -105,11 +102,6 @@ class ParticleTracerIntegrator(SamplingIntegrator):
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
         raise NotImplementedError("ptracer renders light paths (render), not camera samples")
 
-    def render_forward(self, scene, sensor=0, seed=0, spp=0):
-        raise NotImplementedError("ptracer: derivatives are not supported (primal only)")
-
-    def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0):
-        raise NotImplementedError("ptracer: derivatives are not supported (primal only)")
 
     def _visible_emitters(self, scene, ray, wl, active):
         """Radiance of the emitter (area or infinite) the camera ray sees, if any."""
@@ -133,7 +125,7 @@ class ParticleTracerIntegrator(SamplingIntegrator):
         max_depth = self.max_depth if self.max_depth >= 0 else 0x7FFFFFFF
         dispersive = bsdfs.dispersive
 
-        ls, ray, beta = start_light_path(scene, rng, wl, active)
+        ls, ray, beta = start_light_path(scene, self.emission_sampler, rng, wl, active)
         eta = mi.Float(1.0)
         depth = mi.UInt32(1)            # segments so far (Mitsuba's count)
         terminated = mi.Bool(False)
@@ -149,7 +141,7 @@ class ParticleTracerIntegrator(SamplingIntegrator):
             splats.splat(pos, contrib, wl, ok)
 
             # Scatter (importance transport) to the next vertex.
-            ctx = ShadingContext(si, wl, scene.textures)
+            ctx = ShadingContext(si, wl)
             bs = sample_importance(bsdfs, bsdf_id, ctx, rng.next_float32(),
                                    mi.Point2f(rng.next_float32(), rng.next_float32()), active)
             wo = si.to_world(bs.wo)

@@ -20,15 +20,28 @@ import drjit as dr
 import mitsuba as mi
 
 from ..bsdfs.base import ShadingContext
-from .base import INTEGRATORS, SamplingIntegrator, PRIMAL, pbrt_max_depth
+from .base import INTEGRATORS, SamplingIntegrator, path_state, pbrt_max_depth
 from .direct import hit_emission
 
 
 @INTEGRATORS.register("randomwalk")
 class RandomWalkIntegrator(SamplingIntegrator):
+    """``randomwalk`` (pbrt-v4's ``RandomWalkIntegrator``): directions drawn uniformly on the
+    sphere, no light sampling, no MIS, no Russian roulette. Surfaces only.
+
+    =============  ====  =======  =========================================================
+    name           type  default  meaning
+    =============  ====  =======  =========================================================
+    maxdepth       int   5        pbrt-v4's depth: bounces (0: emitters seen directly)
+    max_depth      int   -        Mitsuba's depth instead (= maxdepth + 1)
+    hide_emitters  bool  false    camera rays pass through emitting surfaces and do not see
+                                  the environment
+    =============  ====  =======  =========================================================
+    """
+
     name = "randomwalk"
     surfaces_only = True
-    light_sampler = "uniform"   # no light sampling
+    light_sampler_type = "uniform"   # no light sampling
 
     def __init__(self, props):
         super().__init__(props)
@@ -37,8 +50,6 @@ class RandomWalkIntegrator(SamplingIntegrator):
         props.finish()
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
-        if mode != PRIMAL:
-            raise NotImplementedError(f"{self.name}: gradients are not implemented (use 'path')")
         if self.max_depth == 0:
             return mi.Spectrum(0.0), dr.zeros(mi.Bool, dr.width(active))
         return self._sample(scene, rng, ray, wl, active)
@@ -46,12 +57,7 @@ class RandomWalkIntegrator(SamplingIntegrator):
     @dr.syntax
     def _sample(self, scene, rng, ray, wl, active):
         geo, lights, bsdfs = scene.geometry, scene.lights, scene.bsdfs
-        L = mi.Spectrum(0.0)
-        beta = mi.Spectrum(1.0)
-        depth = mi.UInt32(0)
-        valid = mi.Bool(False)
-        active = mi.Bool(active)
-        ray = mi.Ray3f(ray)
+        ray, active, L, beta, depth, valid = path_state(ray, active)
         while dr.hint(active, label="randomwalk"):
             si, shape = geo.intersect(ray, active)
             hit = active & si.is_valid()
@@ -70,7 +76,7 @@ class RandomWalkIntegrator(SamplingIntegrator):
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, go)
             null = bsdfs.is_null(bsdf_id, go)
             wp = mi.warp.square_to_uniform_sphere(mi.Point2f(rng.next_float32(), rng.next_float32()))
-            ctx = ShadingContext(si, wl, scene.textures)
+            ctx = ShadingContext(si, wl)
             f = bsdfs.eval_pdf(bsdf_id, ctx, si.to_local(wp), go & ~null)[0]
             beta[go & ~null] = beta * f * (4.0 * math.pi)
             through = skip | null

@@ -24,7 +24,7 @@ import mitsuba as mi
 
 from ..bsdfs.base import REFLECTION, TRANSMISSION, ShadingContext
 from ..spectrum import first_only
-from .base import INTEGRATORS, SamplingIntegrator, PRIMAL, pbrt_max_depth
+from .base import INTEGRATORS, SamplingIntegrator, path_state, pbrt_max_depth
 from .direct import hit_emission
 
 # How a direction is drawn without BSDF sampling (per BSDF entry).
@@ -33,9 +33,26 @@ HEMI_SAME, HEMI_OTHER, SPHERE = 0, 1, 2
 
 @INTEGRATORS.register("simplepath")
 class SimplePathIntegrator(SamplingIntegrator):
+    """``simplepath`` (pbrt-v4's ``SimplePathIntegrator``): a path tracer without MIS; lights
+    are picked uniformly. Surfaces only.
+
+    =============  ====  =======  ============================================================
+    name           type  default  meaning
+    =============  ====  =======  ============================================================
+    maxdepth       int   5        pbrt-v4's depth: bounces (0: emitters seen directly)
+    max_depth      int   -        Mitsuba's depth instead (= maxdepth + 1)
+    samplelights   bool  true     sample one light per vertex (emission found by the path then
+                                  counts only after specular bounces)
+    samplebsdf     bool  true     continue by BSDF sampling (else uniformly on the sphere or
+                                  hemisphere)
+    hide_emitters  bool  false    camera rays pass through emitting surfaces and do not see
+                                  the environment
+    =============  ====  =======  ============================================================
+    """
+
     name = "simplepath"
     surfaces_only = True
-    light_sampler = "uniform"   # pbrt-v4's SimplePath picks lights uniformly
+    light_sampler_type = "uniform"   # pbrt-v4's SimplePath picks lights uniformly
 
     def __init__(self, props):
         super().__init__(props)
@@ -46,8 +63,6 @@ class SimplePathIntegrator(SamplingIntegrator):
         props.finish()
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
-        if mode != PRIMAL:
-            raise NotImplementedError(f"{self.name}: gradients are not implemented (use 'path')")
         if self.max_depth == 0:
             return mi.Spectrum(0.0), dr.zeros(mi.Bool, dr.width(active))
         uniform_kind = None
@@ -91,14 +106,9 @@ class SimplePathIntegrator(SamplingIntegrator):
     @dr.syntax
     def _sample(self, scene, rng, ray, wl, active, uniform_kind):
         geo, lights, bsdfs = scene.geometry, scene.lights, scene.bsdfs
-        L = mi.Spectrum(0.0)
-        beta = mi.Spectrum(1.0)
-        depth = mi.UInt32(0)
+        ray, active, L, beta, depth, valid = path_state(ray, active)
         specular = mi.Bool(True)
         terminated = mi.Bool(False)
-        valid = mi.Bool(False)
-        active = mi.Bool(active)
-        ray = mi.Ray3f(ray)
         while dr.hint(active, label="simplepath"):
             si, shape = geo.intersect(ray, active)
             hit = active & si.is_valid()
@@ -119,13 +129,13 @@ class SimplePathIntegrator(SamplingIntegrator):
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, go)
             null = bsdfs.is_null(bsdf_id, go)
             scatter = go & ~null
-            ctx = ShadingContext(si, wl, scene.textures)
+            ctx = ShadingContext(si, wl)
 
             if self.sample_lights:
                 u_light = rng.next_float32()
                 u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
                 lit = scatter & bsdfs.smooth(bsdf_id, scatter)
-                ls = lights.sample_Li(si, u_light, u_pos, wl, lit)
+                ls = lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl, lit)
                 em = lit & (ls.pdf > 0)
                 em &= geo.unoccluded(si, ls.p, em)
                 f_em = bsdfs.eval_pdf(bsdf_id, ctx, si.to_local(ls.wi), em)[0]

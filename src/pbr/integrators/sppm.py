@@ -1,39 +1,6 @@
-"""``sppm``: stochastic progressive photon mapping (pbrt-v4's ``SPPMIntegrator``).
-
-Every iteration runs four vectorised steps:
-
-1. *Camera pass* (one megakernel, one path per pixel): the path follows delta and
-   glossy-only bounces until it reaches a BSDF with a diffuse lobe, its *visible point*.
-   Emission met on the way and direct lighting (NEE + MIS, as ``path`` computes them,
-   including the BSDF-sampled bounce after the visible point) go to the pixel's ``Ld``.
-2. *Hash grid* of the visible points: cells of side ``2 max(r)``, so the box
-   ``[p - r, p + r]`` of a point overlaps at most 2x2x2 cells; every (point, cell) pair
-   is placed into a hash table by a counting sort (``scatter_inc``, ``prefix_sum``).
-3. *Photon pass* (one megakernel): photons leave the lights (``LightSet.sample_Le``, the
-   lights picked by power), bounce by importance-transport BSDF sampling with pbrt-v4's
-   throughput-ratio Russian roulette, and from their second hit on (the first is direct
-   light, which NEE already counts) add ``beta f(wo, wi)`` to every visible point of their
-   cell that lies within the point's radius (a loop over the cell's entries).
-4. *Update* per pixel (Hachisuka & Jensen 2009, gamma = 2/3): with M new photons,
-   ``N' = N + gamma M``, ``r' = r sqrt(N' / (N + M))``, ``tau' = (tau + Phi) r'^2 / r^2``.
-
-All pixels and photons of one iteration share one set of wavelengths (as in pbrt-v4;
-the wavelength offset follows a radical-inverse sequence over iterations). Units: radii
-are in scene units; a photon's ``beta`` is its flux (W) times the light's sampling
-weight, so ``tau / (Np pi r^2)`` is radiance. After K iterations a pixel is
-``(sum_k w_k Ld_k + tau / (Np pi r^2)) / sum_k w_k`` with ``w_k`` the film filter's
-sample weights (pbrt-v4's formula ``Ld / K + tau / (K Np pi r^2)`` when all w = 1).
-
-Depth: ``max_depth`` is Mitsuba's (-1 unlimited, 2 direct light only); pbrt-v4's
-``maxdepth`` counts bounces, ``maxdepth = max_depth - 1``. A photon's k-th hit
-(k = 0: the light's first hit) landing on a visible point found at the v-th camera
-vertex completes a path of v + k bounces; only v + k <= maxdepth count, so ``sppm``
-converges to the image ``path`` estimates with the same ``max_depth`` (pbrt-v4 bounds
-the camera and photon depths separately instead).
-
-Limits (pbrt-v4's): a visible point on a BSDF with diffuse and delta lobes (``plastic``)
-ignores indirect light arriving through the delta lobe; ``mask`` surfaces and ``null``
-boundaries never hold visible points; participating media are not supported.
+"""``sppm``: stochastic progressive photon mapping (pbrt-v4's ``SPPMIntegrator``): per
+iteration a camera pass to visible points, a hash grid of them, a photon pass and the
+progressive radius update. The steps, units and depth conventions: docs/integrators.md.
 """
 
 from __future__ import annotations
@@ -50,9 +17,8 @@ from ..bsdfs import DIFFUSE, NO_BACK, ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..samplers import IndependentSampler
 from ..sampling import power_heuristic
-from ..plugins.props import SceneError
 from ..spectrum import SampledWavelengths, first_only
-from .base import INTEGRATORS, SamplingIntegrator, _progress, emitted_mis
+from .base import INTEGRATORS, SamplingIntegrator, _progress, emitted_mis, mis_state, path_state
 from .lightpath import sample_importance, shading_correction, start_light_path
 
 UNLIMITED = 0xFFFFFFF0
@@ -120,6 +86,26 @@ def radical_inverse_2(i: int) -> float:
 
 @INTEGRATORS.register("sppm")
 class SPPMIntegrator(SamplingIntegrator):
+    """``sppm``: stochastic progressive photon mapping (pbrt-v4's ``SPPMIntegrator``). One
+    iteration per camera sample; lights of photons picked by power. No participating media.
+
+    ===================  ======  =======  =========================================================
+    name                 type    default  meaning
+    ===================  ======  =======  =========================================================
+    max_depth            int     6        Mitsuba's depth (-1 unlimited; 2 direct light only)
+    maxdepth             int     5        pbrt-v4's bounces instead (= max_depth - 1)
+    iterations           int     0        iterations (0: the sensor's sample_count)
+    photonsperiteration  int     -1       photons per iteration (-1: one per pixel)
+    radius               float   0        initial search radius (0: two scene diameters over the
+                                          larger image side)
+    seed                 int     0        added to the render seed
+    hide_emitters        bool    false    camera rays pass through emitting surfaces and do not see
+                                          the environment
+    light_sampler        string  bvh      light choice of next-event estimation: 'uniform', 'power'
+                                          or 'bvh' (pbrt-v4's light BVH)
+    ===================  ======  =======  =========================================================
+    """
+
     name = "sppm"
     traces_light_paths = True
     GAMMA = 2.0 / 3.0      # fraction of new photons kept per iteration (Hachisuka & Jensen)
@@ -139,7 +125,7 @@ class SPPMIntegrator(SamplingIntegrator):
         self.radius = props.float("radius", 0.0, min=0.0)     # 0: automatic (see initial_radius)
         self.seed = props.int("seed", 0)
         self.hide_emitters = props.bool("hide_emitters", False)
-        self.light_sampler = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
+        self.light_sampler_type = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
         props.finish()
         self.history: list[dict] = []
         self.checkpoints: dict[int, mi.TensorXf] = {}
@@ -165,9 +151,7 @@ class SPPMIntegrator(SamplingIntegrator):
         kept in :attr:`checkpoints`; :attr:`history` lists per iteration the photons
         emitted so far, the radius statistics, the mean photon count N and the time
         elapsed."""
-        if len(scene.media) > 0:
-            raise SceneError("scene.integrator: sppm does not support participating media")
-        scene.lights.prepare_emission(scene)
+        self.prepare(scene, sensor)
         cam = scene.sensors[sensor]
         w, h = cam.film.size
         n_pix = w * h
@@ -209,11 +193,6 @@ class SPPMIntegrator(SamplingIntegrator):
         if img is None:
             img = mi.TensorXf(np.zeros((h, w, 3), np.float32))
         return img
-
-    def render_forward(self, *a, **k):
-        raise NotImplementedError("sppm: not differentiable (use path or prb-style integrators)")
-
-    render_backward = render_forward
 
     def sample(self, *a, **k):
         raise NotImplementedError("sppm renders by iterations (render()), not by camera samples")
@@ -275,16 +254,12 @@ class SPPMIntegrator(SamplingIntegrator):
         """Follow a camera path to its visible point. Returns (emitted + direct radiance,
         the ray that reaches the visible point, the throughput there, its vertex index v,
         found mask, wavelength-termination mask)."""
-        geo, lights, bsdfs, tex = scene.geometry, scene.lights, scene.bsdfs, scene.textures
+        geo, lights, bsdfs = scene.geometry, scene.lights, scene.bsdfs
         bounces = self.max_bounces
-        L = mi.Spectrum(0.0)
-        beta = mi.Spectrum(1.0)
+        ray, active, L, beta, depth, valid = path_state(ray, active)
+        prev_p, prev_n, prev_pdf, prev_delta = mis_state(ray)
+        active &= self.max_depth != 0
         eta_scale = mi.Float(1.0)
-        depth = mi.UInt32(0)
-        prev_p = mi.Point3f(ray.o)
-        prev_n = mi.Normal3f(0.0)
-        prev_pdf = mi.Float(1.0)
-        prev_delta = mi.Bool(True)
         found = mi.Bool(False)
         vp_o = mi.Point3f(0.0)
         vp_d = mi.Vector3f(0.0, 0.0, 1.0)
@@ -294,8 +269,6 @@ class SPPMIntegrator(SamplingIntegrator):
         vp_term = mi.Bool(False)
         terminated = mi.Bool(False)
         dispersive = bsdfs.dispersive
-        active = mi.Bool(active) & (self.max_depth != 0)
-        ray = mi.Ray3f(ray)
 
         while dr.hint(active, label="sppm_camera"):
             si, shape = geo.intersect(ray, active)
@@ -309,19 +282,19 @@ class SPPMIntegrator(SamplingIntegrator):
             escaped = active & ~si.is_valid()
             if self.hide_emitters:
                 escaped &= depth > 0
-            Le = beta * emitted_mis(scene, light, si, ray.d, wl, on_light, escaped,
+            Le = beta * emitted_mis(scene, self.light_sampler, light, si, ray.d, wl, on_light, escaped,
                                     prev_p, prev_n, prev_pdf, prev_delta)
 
             # Vertex v = depth + 1: direct light needs v <= bounces; after the visible
             # point only the emission found by its BSDF sample is still added.
             active_next = hit & ~skip & ~found & (depth + 1 <= bounces)
-            ctx = ShadingContext(si, wl, tex)
+            ctx = ShadingContext(si, wl)
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, active_next)
 
             u_light = rng.next_float32()
             u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
             smooth = active_next & bsdfs.smooth(bsdf_id, active_next)
-            ls = lights.sample_Li(si, u_light, u_pos, wl, smooth)
+            ls = lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl, smooth)
             em = smooth & (ls.pdf > 0)
             em &= geo.unoccluded(si, ls.p, em)
             wo_em = si.to_local(ls.wi)
@@ -418,9 +391,9 @@ class SPPMIntegrator(SamplingIntegrator):
     @dr.syntax
     def _trace_photons(self, scene, grid, vp, r2, phi, m, rng, wl):
         """Trace one photon per lane; deposits are scatter-added into ``phi`` and ``m``."""
-        geo, bsdfs, tex = scene.geometry, scene.bsdfs, scene.textures
+        geo, bsdfs = scene.geometry, scene.bsdfs
         bounces = self.max_bounces
-        les, ray, beta = start_light_path(scene, rng, wl, mi.Bool(True))
+        les, ray, beta = start_light_path(scene, self.emission_sampler, rng, wl, mi.Bool(True))
         depth = mi.UInt32(0)               # photon hit index k (0: first hit, direct light)
         terminated = mi.Bool(False)
         dispersive = bsdfs.dispersive
@@ -433,7 +406,7 @@ class SPPMIntegrator(SamplingIntegrator):
                           hit & (depth > 0))
 
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
-            ctx = ShadingContext(si, wl, tex)
+            ctx = ShadingContext(si, wl)
             u1 = rng.next_float32()
             u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
             bs = sample_importance(bsdfs, bsdf_id, ctx, u1, u2, hit)

@@ -1,24 +1,7 @@
 """``volpath``: volumetric path tracing with null scattering and spectral MIS (pbrt-v4's
-VolPathIntegrator; Mitsuba's ``volpath``/``volpathmis`` names select it too).
-
-Free flights are sampled against the medium majorant with the first (hero) wavelength;
-every wavelength keeps its own *rescaled path probabilities* ``r_u`` (unidirectional:
-the density of having sampled this path with that wavelength's coefficients) and
-``r_l`` (the same path ending in light sampling). Contributions are divided by the
-average of these over the wavelengths, which is one-sample MIS across wavelengths:
-chromatic media (``sigma_t`` varying with wavelength) do not produce the fireflies that
-hero-wavelength-only tracking gives. The same ratios give the MIS weights between light
-sampling and BSDF/phase sampling (the balance heuristic).
-
-Shadow rays estimate transmittance by ratio tracking through media and ``null``
-surfaces (with pbrt-v4's Russian roulette once it is small). Every null collision is
-bounded per segment (``max_null``); paths that reach the bound are terminated and
-counted in :attr:`VolPathIntegrator.capped` (a warning reports them).
-
-Conventions: ``max_depth`` as Mitsuba's volpath (real scattering events, in media or at
-non-null surfaces, count; null surfaces do not; -1 is unlimited); ``hide_emitters``:
-camera rays pass through area lights. Surfaces whose BSDF is ``null`` are medium
-boundaries: paths and shadow rays cross them unchanged.
+``VolPathIntegrator``; Mitsuba's ``volpath``/``volpathmis`` names select it too), and
+``simplevolpath``, its reference estimator, on the shared volumetric walk
+(:mod:`.volume`). Rescaled path probabilities, shadow rays and depth: docs/integrators.md.
 """
 
 from __future__ import annotations
@@ -32,7 +15,7 @@ from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..spectrum import first_only
 from . import volume
-from .base import INTEGRATORS, SamplingIntegrator, mis_state, path_state
+from .base import INTEGRATORS, SamplingIntegrator, depth_limit, mis_state, path_state
 
 
 class _MediumAware(SamplingIntegrator):
@@ -40,13 +23,31 @@ class _MediumAware(SamplingIntegrator):
 
     _medium = 0
 
-    def _plan(self, scene, sensor, spp):
+    def prepare(self, scene, sensor: int = 0) -> None:
+        super().prepare(scene, sensor)
         self._medium = scene.sensors[sensor].medium
-        return super()._plan(scene, sensor, spp)
 
 
 @INTEGRATORS.register("volpath", "volpathmis")
 class VolPathIntegrator(_MediumAware):
+    """``volpath`` / ``volpathmis``: volumetric path tracing with null scattering and
+    spectral MIS (pbrt-v4's ``VolPathIntegrator``). Paths that reach
+    ``max_null_collisions`` are ended and counted in :attr:`capped` (with a warning).
+
+    ===================  ======  =======  =========================================================
+    name                 type    default  meaning
+    ===================  ======  =======  =========================================================
+    max_depth            int     -1       longest path in real scattering events (in media or at
+                                          non-null surfaces; -1 unlimited)
+    rr_depth             int     5        depth from which Russian roulette may end a path
+    hide_emitters        bool    false    camera rays pass through emitting surfaces and do not see
+                                          the environment
+    light_sampler        string  bvh      light choice of next-event estimation: 'uniform', 'power'
+                                          or 'bvh' (pbrt-v4's light BVH)
+    max_null_collisions  int     65536    null collisions a path segment or shadow ray may have
+    ===================  ======  =======  =========================================================
+    """
+
     name = "volpath"
 
     def __init__(self, props):
@@ -54,7 +55,7 @@ class VolPathIntegrator(_MediumAware):
         self.max_depth = props.int("max_depth", -1, min=-1)
         self.rr_depth = props.int("rr_depth", 5, min=0)
         self.hide_emitters = props.bool("hide_emitters", False)
-        self.light_sampler = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
+        self.light_sampler_type = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
         self.max_null = props.int("max_null_collisions", 1 << 16, min=1)
         props.finish()
         self.capped = 0
@@ -165,9 +166,9 @@ class VolPathIntegrator(_MediumAware):
     # -- the estimator --------------------------------------------------------------------
     @dr.syntax
     def _sample(self, scene, rng, ray, wl, active):
-        geo, lights, bsdfs, tex, media = scene.geometry, scene.lights, scene.bsdfs, scene.textures, scene.media
+        geo, lights, bsdfs, media = scene.geometry, scene.lights, scene.bsdfs, scene.media
         has_media = len(media) > 0
-        max_depth = self.max_depth if self.max_depth >= 0 else 0xFFFFFFFF
+        max_depth = depth_limit(self.max_depth)
 
         ray, active, L, beta, depth, valid = path_state(ray, active)
         prev_p, prev_n, prev_pdf, prev_delta = mis_state(ray)
@@ -208,14 +209,14 @@ class VolPathIntegrator(_MediumAware):
             skip = on_light & (depth == 0) if self.hide_emitters else mi.Bool(False)
             on_light &= ~skip
             Le = lights.L(light - 1, si, wl, on_light)
-            pdf_light = lights.pdf_Li(light - 1, prev_p, prev_n, si, on_light & ~prev_delta)
+            pdf_light = lights.pdf_Li(self.light_sampler, light - 1, prev_p, prev_n, si, on_light & ~prev_delta)
             denom = dr.select(prev_delta, dr.mean(r_u), dr.mean(r_u + r_l * pdf_light))
             L[on_light] = L + beta * Le * dr.rcp(denom)
             if lights.has_infinite:
                 escaped = active & ~scattered & ~absorbed & ~hit
                 if self.hide_emitters:
                     escaped &= depth > 0
-                for Le_inf, pdf_inf in lights.Le_escaped(ray.d, wl, prev_p, prev_n, escaped):
+                for Le_inf, pdf_inf in lights.Le_escaped(ray.d, wl, prev_p, prev_n, escaped, self.light_sampler):
                     d_inf = dr.select(prev_delta, dr.mean(r_u), dr.mean(r_u + r_l * pdf_inf))
                     L[escaped] = L + beta * Le_inf * dr.rcp(d_inf)
 
@@ -224,13 +225,13 @@ class VolPathIntegrator(_MediumAware):
             valid |= at_vertex
 
             # -- next-event estimation from the vertex (surface or medium point) ----------
-            ctx = ShadingContext(si, wl, tex)
+            ctx = ShadingContext(si, wl)
             smooth = rs & bsdfs.smooth(bsdf_id, rs)
             nee = smooth | sc
             ref = volume.nee_reference(si, sc, p_sc)
             u_light = rng.next_float32()
             u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
-            ls = lights.sample_Li(ref, u_light, u_pos, wl, nee)
+            ls = lights.sample_Li(self.light_sampler, ref, u_light, u_pos, wl, nee)
             nee &= ls.pdf > 0
             wo_em = si.to_local(ls.wi)
             u1 = rng.next_float32()
@@ -277,18 +278,25 @@ class VolPathIntegrator(_MediumAware):
 
 @INTEGRATORS.register("simplevolpath")
 class SimpleVolPathIntegrator(_MediumAware):
-    """``simplevolpath`` (pbrt-v4's SimpleVolPathIntegrator): a reference estimator with
-    no light sampling and no spectral MIS. Only the first wavelength is traced (the
-    others are terminated, as pbrt-v4 does); free flights use delta tracking, emission
-    is found by hitting lights, surfaces scatter by BSDF sampling."""
+    """``simplevolpath`` (pbrt-v4's ``SimpleVolPathIntegrator``): a reference estimator
+    with no light sampling and no spectral MIS. Only the first wavelength is traced (the
+    others are terminated, as pbrt-v4 does); free flights use delta tracking, emission is
+    found by hitting lights, surfaces scatter by BSDF sampling.
+
+    =========  ====  =======  =====================================================
+    name       type  default  meaning
+    =========  ====  =======  =====================================================
+    max_depth  int   5        longest path in real scattering events (-1 unlimited)
+    =========  ====  =======  =====================================================
+    """
 
     name = "simplevolpath"
+    light_sampler_type = "uniform"   # unused: no light sampling
 
     def __init__(self, props):
         super().__init__(props)
         self.max_depth = props.int("max_depth", 5, min=-1)
         props.finish()
-        self.light_sampler = "uniform"
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
         return self._sample(scene, rng, ray, wl, active)
@@ -314,8 +322,8 @@ class SimpleVolPathIntegrator(_MediumAware):
 
     @dr.syntax
     def _sample(self, scene, rng, ray, wl, active):
-        geo, lights, bsdfs, tex, media = scene.geometry, scene.lights, scene.bsdfs, scene.textures, scene.media
-        max_depth = self.max_depth if self.max_depth >= 0 else 0xFFFFFFFF
+        geo, lights, bsdfs, media = scene.geometry, scene.lights, scene.bsdfs, scene.media
+        max_depth = depth_limit(self.max_depth)
         L = mi.Float(0.0)
         beta = mi.Float(1.0)
         depth = mi.UInt32(0)
@@ -345,7 +353,7 @@ class SimpleVolPathIntegrator(_MediumAware):
             bsdf_id, skip, real, at_vertex, go_on, sc, rs = volume.classify(
                 scene, shape, surf, scattered, mi.Bool(False), depth, max_depth)
             valid |= at_vertex
-            ctx = ShadingContext(si, wl, tex)
+            ctx = ShadingContext(si, wl)
             bs = bsdfs.sample(bsdf_id, ctx, rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32()), rs)
             wi, pdf, weight, delta = volume.sample_direction(media, medium, ray, si, bs, sc, rng)
             cont = go_on & (pdf > 0)

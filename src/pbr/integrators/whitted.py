@@ -1,33 +1,6 @@
-"""``whitted``: recursive ray tracing after Whitted (pbrt-v3's WhittedIntegrator).
-
-At every surface a ray reaches: the radiance it emits, plus direct light from *every*
-light with one shadow-ray sample each (area lights sampled by area, no MIS, no light
-sampler), plus the radiance arriving along the *specular* (delta) directions, traced
-recursively. At a surface with both a reflected and a transmitted delta lobe
-(``dielectric``, ``thindielectric``) both branches are followed, each weighted by its
-Fresnel factor, not chosen at random; smooth lobes receive direct light only (no
-indirect diffuse or glossy light).
-
-The specular lobes of a BSDF are found through its sampling routine: the lobe chosen
-by the lobe-selection number u = 0 and the one chosen by u -> 1 (the same lobe is
-followed once). A delta sample carries ``weight = f / p`` and the discrete probability
-``pdf = p`` of its lobe, so ``weight * pdf`` is the lobe's Fresnel factor. This covers
-every BSDF with at most two delta lobes (conductor, dielectric, thindielectric, plastic's
-coating, null, masks); a ``blendbsdf`` of two specular BSDFs follows only the reflected
-lobe of one and the transmitted lobe of the other.
-
-Vectorised as a wavefront over depth levels: each level is one array of rays with a
-throughput, shaded in one kernel; the rays its specular branches spawn are compacted
-(``dr.compress``) into the next level's array, and each ray's radiance is scatter-added
-to its camera sample's slot. Every ray draws its random numbers from its own stream,
-keyed by its camera sample and its place in the ray tree.
-
-``max_depth`` has Mitsuba's meaning (path segments, counting the camera ray): light
-emitted at the end of k specular bounces counts when k + 1 <= max_depth, direct light
-there when k + 2 <= max_depth; the default 5 allows 3 specular bounces before direct
-lighting. It must be finite: each dielectric hit doubles the rays.
-``hide_emitters``: camera rays pass through emitting surfaces and do not see the
-environment (as Mitsuba).
+"""``whitted``: recursive ray tracing after Whitted (pbrt-v3's ``WhittedIntegrator``),
+vectorised as a wavefront over depth levels (the rays of specular branches are
+compacted into the next level). Lobes, branching and depth: docs/integrators.md.
 """
 
 from __future__ import annotations
@@ -38,15 +11,29 @@ import mitsuba as mi
 from ..bsdfs.base import ShadingContext
 from ..samplers import IndependentSampler
 from ..spectrum import N_WAVELENGTHS, SampledWavelengths, first_only
-from .base import INTEGRATORS, SamplingIntegrator, PRIMAL
+from .base import INTEGRATORS, SamplingIntegrator
 from .direct import hit_emission, intersect_camera_ray
 
 
 @INTEGRATORS.register("whitted")
 class WhittedIntegrator(SamplingIntegrator):
+    """``whitted``: recursive ray tracing (pbrt-v3's ``WhittedIntegrator``): emission,
+    direct light from every light, and both branches of every specular surface. Surfaces
+    only.
+
+    =============  ====  =======  ==============================================================
+    name           type  default  meaning
+    =============  ====  =======  ==============================================================
+    max_depth      int   5        path segments counting the camera ray; finite (each dielectric
+                                  hit doubles the rays)
+    hide_emitters  bool  false    camera rays pass through emitting surfaces and do not see
+                                  the environment
+    =============  ====  =======  ==============================================================
+    """
+
     name = "whitted"
     surfaces_only = True
-    light_sampler = "uniform"   # unused: every light is sampled
+    light_sampler_type = "uniform"   # unused: every light is sampled
     # Lobe-selection numbers of the branches: the first lobe and the last one.
     branch_u = (0.0, 1.0 - 2.0 ** -24)
 
@@ -60,8 +47,6 @@ class WhittedIntegrator(SamplingIntegrator):
         props.finish()
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
-        if mode != PRIMAL:
-            raise NotImplementedError("whitted: gradients are not implemented (use 'path')")
         n = dr.width(active)
         if self.max_depth == 0:
             return mi.Spectrum(0.0), dr.zeros(mi.Bool, n)
@@ -136,7 +121,7 @@ class WhittedIntegrator(SamplingIntegrator):
                     L += Le_inf
         branches = None
         if depth + 2 <= self.max_depth:
-            ctx = ShadingContext(si, wl, scene.textures)
+            ctx = ShadingContext(si, wl)
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
 
             # Direct light: one sample of every light.

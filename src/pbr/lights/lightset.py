@@ -13,7 +13,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .. import dispatch
-from ..plugins.props import SceneError
+from ..plugins.tables import own_table_memory
 from .area import AreaLight
 from .base import LIGHT_TYPES, LightSample, LightType, LeSample
 from .lightsamplers import make_light_sampler, LightTable
@@ -51,7 +51,7 @@ class LightSet:
         self.paths.append(props.path)
         return len(self.entries) - 1
 
-    def build(self, scene, sampler_kind: str) -> None:
+    def build(self, scene) -> None:
         self.order = list(self.families)
         for f in self.families.values():
             f.textures = scene.textures
@@ -71,7 +71,20 @@ class LightSet:
         c = np.array(bbox.center()) if bbox.valid() else np.zeros(3)
         self.scene_center = c
         self.scene_radius = float(np.linalg.norm(np.array(bbox.max) - c)) if bbox.valid() else 1.0
-        self.sampler = make_light_sampler(sampler_kind, table.powers, table.bounds)
+        self.table = table
+        self._samplers = {}
+
+    def sampler(self, kind: str):
+        """The light sampler ``kind`` ('uniform', 'power' or 'bvh'; see
+        :mod:`.lightsamplers`) over this build's lights, built once per build. Integrators
+        fetch theirs in their per-render ``prepare`` step and pass it to :meth:`sample_Li`,
+        :meth:`pdf_Li`, :meth:`Le_escaped` (next-event estimation) or :meth:`sample_Le`,
+        :meth:`pmf_Le` (light paths: 'power', pbrt-v4's choice for emission)."""
+        if kind not in self._samplers:
+            sampler = make_light_sampler(kind, self.table.powers, self.table.bounds)
+            own_table_memory(sampler)
+            self._samplers[kind] = sampler
+        return self._samplers[kind]
 
     def _map_shapes(self, scene, table) -> None:
         """``scene.shape_light``: shape -> its emitter's first light + 1 (0: none), and
@@ -111,12 +124,13 @@ class LightSet:
         active = self._area_only(light, active)
         return self.area.L(dr.gather(mi.UInt32, self.local_of, light, active), si, wl, active)
 
-    def sample_Li(self, ref, u1, u2, wl, active) -> LightSample:
-        """Pick a light (sampler probability included in the returned pdf) and sample it."""
+    def sample_Li(self, sampler, ref, u1, u2, wl, active) -> LightSample:
+        """Pick a light with ``sampler`` (its probability included in the returned pdf)
+        and sample it."""
         if not self.entries:
             # No lights: an empty sample (pdf 0), so no shadow ray is traced.
             return LightSample()
-        light, pmf = self.sampler.sample(u1, ref.p, ref.n, active)
+        light, pmf = sampler.sample(u1, ref.p, ref.n, active)
         ls = self._dispatch("sample_Li", light, active, ref, u2, wl)
         ls.pdf = ls.pdf * pmf
         return ls
@@ -131,13 +145,13 @@ class LightSet:
         """Number of lights after expansion (one per emissive triangle)."""
         return dr.width(self.local_of) if self.entries else 0
 
-    def pdf_Li(self, light, ref_p, ref_n, si, active):
-        """Density of NEE reaching area-light hit ``si`` from (ref_p, ref_n)."""
+    def pdf_Li(self, sampler, light, ref_p, ref_n, si, active):
+        """Density of NEE with ``sampler`` reaching area-light hit ``si`` from (ref_p, ref_n)."""
         if "area" not in self.families:
             return mi.Float(0.0)
         active = self._area_only(light, active)
         local = dr.gather(mi.UInt32, self.local_of, light, active)
-        return self.sampler.pmf(light, ref_p, ref_n, active) * self.area.pdf_Li(local, ref_p, si, active)
+        return sampler.pmf(light, ref_p, ref_n, active) * self.area.pdf_Li(local, ref_p, si, active)
 
     def _area_only(self, light, active):
         if not self._other_surface:
@@ -148,8 +162,9 @@ class LightSet:
     def has_infinite(self) -> bool:
         return bool(self.infinite_ids)
 
-    def Le_escaped(self, d, wl, ref_p, ref_n, active):
-        """[(radiance, NEE density of that direction)] for each infinite light."""
+    def Le_escaped(self, d, wl, ref_p, ref_n, active, sampler=None):
+        """[(radiance, density of NEE with ``sampler`` choosing that direction)] for each
+        infinite light (density None without a sampler)."""
         out = []
         for g in self.infinite_ids:
             t, i = self.entries[g]
@@ -157,40 +172,21 @@ class LightSet:
             idx = mi.UInt32(i)
             kw = {"ref_p": ref_p} if getattr(fam, "needs_ref", False) else {}  # portal lights: ray origin
             Le = fam.Le(idx, d, wl, active, **kw)
-            pdf = fam.pdf_Le_dir(idx, d, active, **kw) * self.sampler.pmf(
+            pdf = None if sampler is None else fam.pdf_Le_dir(idx, d, active, **kw) * sampler.pmf(
                 mi.UInt32(int(self.first_light[g])), ref_p, ref_n, active)
             out.append((Le, pdf))
         return out
 
     # -- emission: rays leaving the lights (light tracing, BDPT, photon mapping) ---------
-    def prepare_emission(self, scene) -> None:
-        """Build the emission-side light sampler: lights are picked in proportion to their
-        power (pbrt-v4's ``PowerLightSampler`` for light paths), independently of any
-        shading point. Call it (outside kernels) before ``sample_Le``/``pmf_Le``, after
-        every scene (re)build; integrators do this at the start of ``render``."""
-        if self.unsupported_emission():
-            t = self.entries[self.unsupported_emission()[0]][0]
-            raise SceneError(f"scene: the {t!r} emitter cannot emit light paths (no sample_Le)")
-        table = LightTable(self.entries, self.families, scene)
-        self.emission_sampler = make_light_sampler("power", table.powers)
-        self._emission_for = self.sampler
-
-    def unsupported_emission(self) -> list:
-        """Emitter indices (entries) whose family has no ``sample_Le``."""
-        return [g for g, (t, _) in enumerate(self.entries) if not self.families[t].emits_rays]
-
-    def _emission(self):
-        if getattr(self, "_emission_for", None) is not self.sampler:
-            raise RuntimeError("LightSet.prepare_emission(scene) must be called after each scene build")
-        return self.emission_sampler
-
-    def sample_Le(self, u_light, u_pos, u_dir, wl, active) -> LeSample:
-        """Pick a light in proportion to its power and sample a ray leaving it (see
+    # -- emission: rays leaving the lights (light tracing, BDPT, photon mapping) ---------
+    def sample_Le(self, sampler, u_light, u_pos, u_dir, wl, active) -> LeSample:
+        """Pick a light with ``sampler`` (independent of any shading point: pbrt-v4 uses
+        the power sampler) and sample a ray leaving it (see
         :class:`pbr.lights.base.LeSample`). Lanes with nothing to emit have ``pdf_dir = 0``
         and ``weight = 0``."""
         if not self.entries:
             return LeSample()
-        light, pmf = self._emission().sample(u_light, None, None, active)
+        light, pmf = sampler.sample(u_light, None, None, active)
         light = mi.UInt32(light)
         local = dr.gather(mi.UInt32, self.local_of, light, active)
         fams = [self.families[t] for t in self.order]
@@ -208,9 +204,9 @@ class LightSet:
         s.light = light
         return s
 
-    def pmf_Le(self, light, active=True):
-        """Probability that ``sample_Le`` picks light ``light``."""
-        return self._emission().pmf(light, None, None, active)
+    def pmf_Le(self, sampler, light, active=True):
+        """Probability that ``sample_Le`` with ``sampler`` picks light ``light``."""
+        return sampler.pmf(light, None, None, active)
 
     def pdf_Le(self, light, p, n, d, active):
         """(pdf_pos, pdf_dir) with which light ``light`` emits the ray from ``p`` along

@@ -212,10 +212,8 @@ class Loader:
         if integrator_props is None:
             integrator_props = Props({"type": "path"}, "scene.integrator", self)
         integrator = INTEGRATORS[integrator_props.type](integrator_props)
-        scene = Scene(self.textures, self.bsdfs, self.lights, self.media, shapes, sensors, integrator,
-                      self.bsdf_textures)
-        integrator.check(scene)
-        return scene
+        return Scene(self.textures, self.bsdfs, self.lights, self.media, shapes, sensors, integrator,
+                     self.bsdf_textures)
 
 
 def load_dict(d: dict, base_dir: str | None = None) -> Scene:

@@ -54,12 +54,15 @@ class Scene:
         self.build()
 
     def build(self) -> None:
-        """(Re)build every parameter table from the current parameter values."""
+        """(Re)build every parameter table from the current parameter values, and prepare
+        the scene's integrator for them (its light sampler is built here, outside any
+        render, so that a render inside ``dr.freeze`` builds nothing)."""
         self.textures.build()
         self.bsdfs.build(self.textures)
         self.media.build(self.textures)
-        self.lights.build(self, self.integrator.light_sampler)
+        self.lights.build(self)
         own_table_memory(self)
+        self.integrator.prepare(self)
 
     @property
     def spp(self) -> int:

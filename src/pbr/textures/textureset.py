@@ -129,8 +129,8 @@ class TextureSet:
         # Checkerboards.
         if self.checkers:
             ch = [self.items[s] for s in self.checkers]
-            T.checkers = CheckerTable(mi.UInt32([index[c.color0] for c in ch]), mi.UInt32([index[c.color1] for c in ch]),
-                                      _uv_rows(ch))
+            T.checkers = CheckerTable(mi.UInt32([index[c.color0] for c in ch]),
+                                      mi.UInt32([index[c.color1] for c in ch]), _uv_rows(ch))
         # Bitmaps: addressing of the texel pool.
         if self.bitmaps:
             bm = [self.items[s] for s in self.bitmaps]

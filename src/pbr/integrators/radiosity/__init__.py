@@ -1,24 +1,7 @@
-"""``radiosity``: the finite-element solution of diffuse global illumination.
-
-The scene's mesh triangles (subdivided to at most ``max_area``) are patches of constant
-exitant radiance; each gets one spectrum on ``wavelength_bins`` bins (:mod:`.bins`). The
-system L = Le + rho F L is solved once per scene by one of four solvers (:mod:`.solvers`)
-with form factors from ray casting (:mod:`.formfactors`), cached on the integrator, and
-then viewed from any camera: a camera ray's first hit looks up its patch (flat) or the
-barycentric blend of the patch's vertex values (``smooth``). The rendered radiance at a
-hit is
-
-    L(x, l) = Le(x, l) + rho(x, l) H(l),
-
-with the emission and reflectance evaluated exactly at the hit and the wavelengths the
-film sampled, and only the gathered incident radiance ``H`` (irradiance / pi) taken from
-the solution (interpolated between bin centres). So textures keep their detail and a
-directly seen emitter its exact spectrum; for constant materials it is exactly the
-patch solution. Filters and ``spp`` work as for ``path``.
-
-Scenes: every shape a triangle mesh, every BSDF a plain one-sided ``diffuse``, every
-emitter ``area`` (one-sided), no media; anything else is a SceneError naming its key.
-Units: radiance as the rest of pbr; radiosity B = pi L.
+"""``radiosity``: the finite-element solution of diffuse global illumination: patches
+(:mod:`.patches`) of constant radiance on spectral bins (:mod:`.bins`), form factors
+(:mod:`.formfactors`), four solvers (:mod:`.solvers`); the solution is viewed from any
+camera. How a hit is shaded from it: docs/integrators.md.
 """
 
 from __future__ import annotations
@@ -100,6 +83,27 @@ def _form_factor_bar(progress, n):
 
 @INTEGRATORS.register("radiosity")
 class RadiosityIntegrator(SamplingIntegrator):
+    """``radiosity``: the finite-element solution of diffuse global illumination, solved
+    once per scene and viewed from any camera. Triangle meshes, one-sided ``diffuse``
+    BSDFs and ``area`` emitters only.
+
+    ===================  ======  ============  ============================================================
+    name                 type    default       meaning
+    ===================  ======  ============  ============================================================
+    solver               string  gauss_seidel  'jacobi', 'gauss_seidel', 'progressive' or
+                                               'stochastic_jacobi'
+    max_area             float   0             largest patch area (0: the mesh triangles as given)
+    wavelength_bins      int     32            spectral bins of the solution (>= 4)
+    max_iterations       int     10000         iteration limit of the solvers
+    tolerance            float   1e-4          relative change of the total power (jacobi, gauss_seidel) or
+                                               unshot power (shooting solvers) at which they stop
+    form_factor_samples  int     16            ray samples per form factor
+    rays_per_iteration   int     1048576       rays per stochastic_jacobi iteration
+    smooth               bool    false         interpolate vertex values (else flat per patch)
+    seed                 int     0             seed of the form factors and rays
+    ===================  ======  ============  ============================================================
+    """
+
     name = "radiosity"
 
     def __init__(self, props):
@@ -171,8 +175,6 @@ class RadiosityIntegrator(SamplingIntegrator):
         return super().render(scene, sensor=sensor, seed=seed, spp=spp, progress=progress)
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
-        if mode != PRIMAL:
-            raise NotImplementedError("radiosity: the solution is not differentiable (primal renders only)")
         sol = self.solve(scene)
         si, shape = scene.geometry.intersect(ray, active)
         hit = active & si.is_valid()
@@ -186,7 +188,7 @@ class RadiosityIntegrator(SamplingIntegrator):
         else:
             H = sol.bins.lookup(table, patch, wl.lambda_, hit)
         bsdf = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
-        f, _ = scene.bsdfs.eval_pdf(bsdf, ShadingContext(si, wl, scene.textures), mi.Vector3f(0, 0, 1), hit)
+        f, _ = scene.bsdfs.eval_pdf(bsdf, ShadingContext(si, wl), mi.Vector3f(0, 0, 1), hit)
         light = scene.lights.light_of_hit(scene, shape, si, hit)
         Le = scene.lights.L(light - 1, si, wl, hit & (light > 0))
         return dr.select(hit, Le + f * dr.pi * H, 0.0), hit

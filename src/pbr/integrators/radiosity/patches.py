@@ -83,8 +83,8 @@ class Patches:
         for s in range(len(to_mi)):
             shape = shapes[int(to_mi[s])]
             if not shape.is_mesh():
-                raise SceneError(f"{scene.shape_paths[s]}: the radiosity integrator needs triangle meshes (rectangle, cube, "
-                                 f"obj, ply); a {shape.class_name().lower()} is not one")
+                raise SceneError(f"{scene.shape_paths[s]}: the radiosity integrator needs triangle meshes "
+                                 f"(rectangle, cube, obj, ply); a {shape.class_name().lower()} is not one")
             v, f = _mesh(shape)
             shape_tri.append(n_tri)
             n_tri += len(f)
@@ -251,7 +251,7 @@ class Patches:
         wl = SampledWavelengths(mi.Spectrum(lam), mi.Spectrum(1.0))
         shape = dr.gather(mi.UInt32, mi.UInt32(self.shape.astype(np.uint32)), patch)
         bsdf = dr.gather(mi.UInt32, scene.shape_bsdf, shape)
-        f, _ = scene.bsdfs.eval_pdf(bsdf, ShadingContext(si, wl, scene.textures), mi.Vector3f(0, 0, 1), True)
+        f, _ = scene.bsdfs.eval_pdf(bsdf, ShadingContext(si, wl), mi.Vector3f(0, 0, 1), True)
         light = scene.lights.light_of_hit(scene, shape, si, True)
         Le = scene.lights.L(light - 1, si, wl, light > 0)
         rho, Le = np.array(f * dr.pi), np.array(Le)                  # (4, N G)

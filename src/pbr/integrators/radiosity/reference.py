@@ -30,6 +30,7 @@ def path_at_centroids(scene, patches, bins, spp: int, seed: int = 0, max_depth: 
     the centroids of the patches ``subset`` (default: all). ``offset`` is the probe's
     distance from the surface, relative to the scene's extent."""
     path = PathIntegrator(Props({"type": "path", "max_depth": max_depth}, "radiosity.reference"))
+    path.prepare(scene)
     sub = np.arange(patches.count) if subset is None else np.asarray(subset, np.int64)
     groups = bins.groups()
     G, M = len(groups), len(sub)
