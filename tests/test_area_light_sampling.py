@@ -34,7 +34,8 @@ def _hit_pdf(scene, d):
     si, shape = scene.geometry.intersect(ray, mi.Bool(True))
     light = scene.lights.light_of_hit(scene, shape, si, si.is_valid())
     hit = si.is_valid() & (light > 0) & (si.wi.z > 0)
-    p = scene.lights.pdf_Li(scene.integrator.light_sampler, light - 1, mi.Point3f(0, 0, 0), mi.Normal3f(0, 0, 1), si, hit)
+    p = scene.lights.pdf_Li(scene.integrator.light_sampler, light - 1, mi.Point3f(0, 0, 0), mi.Normal3f(0, 0, 1),
+                            si, hit)
     return dr.select(hit, p, 0.0)
 
 
@@ -50,8 +51,8 @@ def test_direction_sampling_matches_pdf(kind, tmp_path):
     ref.n = mi.Normal3f(0, 0, 1)
     wl = pbr.spectrum.SampledWavelengths.sample_visible(dr.zeros(mi.Float, n) + 0.5)
     rng = mi.PCG32(n)
-    ls = scene.lights.sample_Li(scene.integrator.light_sampler, ref, rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32()),
-                                wl, mi.Bool(True))
+    ls = scene.lights.sample_Li(scene.integrator.light_sampler, ref, rng.next_float32(),
+                                mi.Point2f(rng.next_float32(), rng.next_float32()), wl, mi.Bool(True))
     pdf_s = np.array(ls.pdf, np.float64)
     valid = pdf_s > 0
     assert valid.mean() > 0.2

@@ -467,8 +467,8 @@ def test_extreme_lights_stay_finite(kind):
     img = np.asarray(pbr.render(scene, spp=16, seed=1))
     assert np.all(np.isfinite(img)) and img.mean() > 0     # (spectral noise may leave sRGB slightly < 0)
     n = len(scene.lights.local_of)
-    pmf = np.array(scene.integrator.light_sampler.pmf(mi.UInt32(np.arange(n, dtype=np.uint32)), mi.Point3f(0.5, 0.0, 0.5),
-                                             mi.Normal3f(0, 1, 0)))
+    pmf = np.array(scene.integrator.light_sampler.pmf(mi.UInt32(np.arange(n, dtype=np.uint32)),
+                                                      mi.Point3f(0.5, 0.0, 0.5), mi.Normal3f(0, 1, 0)))
     # (the BVH may find no light where a node's bounds face the point but none of its
     # children's do: then it chooses nothing, as pbrt-v4 does)
     assert np.all(np.isfinite(pmf)) and 0.999 < pmf.sum() < 1 + 1e-5

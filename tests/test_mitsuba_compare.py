@@ -1,4 +1,4 @@
-"""pbr vs Mitsuba 3 (llvm_ad_spectral) through the statistical image test of DESIGN.md.
+"""pbr vs Mitsuba 3 (llvm_ad_spectral) through the statistical image test of docs/architecture.md.
 
 Both renderers get the same scene dict and independent seeds; a biased pbr render
 (albedo x1.02, one bounce fewer) must fail the same test."""

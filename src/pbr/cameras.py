@@ -49,6 +49,23 @@ def _x_fov(props: Props, aspect: float) -> float:
 
 @SENSORS.register("perspective")
 class PerspectiveCamera:
+    """``perspective``: Mitsuba 3's pinhole camera (same parameters and conventions). Nested:
+    an ``hdrfilm``, an ``independent`` sampler and the medium the camera sits in.
+
+    ========================  =========  ========  ==================================================
+    name                      type       default   meaning
+    ========================  =========  ========  ==================================================
+    fov                       float      -         field of view (degrees) along fov_axis
+    fov_axis                  string     'x'       'x', 'y', 'diagonal', 'smaller' or 'larger'
+    focal_length              string     -         instead of fov: a 35 mm equivalent, e.g. '50mm'
+    to_world                  transform  identity  camera-to-world (rigid; the camera looks down +z)
+    near_clip                 float      0.01      near clip distance
+    far_clip                  float      10000     far clip distance
+    principal_point_offset_x  float      0         shift of the image centre (fraction of the width)
+    principal_point_offset_y  float      0         shift of the image centre (fraction of the height)
+    ========================  =========  ========  ==================================================
+    """
+
     medium = 0  # index + 1 of the medium the camera sits in (0: vacuum)
 
     def __init__(self, props: Props):

@@ -16,6 +16,22 @@ FILMS = Registry("film")
 
 @FILMS.register("hdrfilm")
 class HDRFilm:
+    """``hdrfilm``: the image the camera develops (linear sRGB, float). Nested: a
+    reconstruction filter (default ``gaussian``).
+
+    ================  ======  =========  ===================================================
+    name              type    default    meaning
+    ================  ======  =========  ===================================================
+    width             int     768        image width (pixels)
+    height            int     576        image height (pixels)
+    pixel_format      string  'rgb'      only 'rgb'
+    component_format  string  'float32'  accepted: 'float16', 'float32' (images are float32)
+    file_format       string  'openexr'  accepted: 'openexr', 'exr'
+    crop_*            int     -          cropping is not supported (only the full image)
+    sample_border     bool    false      only false
+    ================  ======  =========  ===================================================
+    """
+
     def __init__(self, props: Props):
         self.width = props.int("width", 768, min=1)
         self.height = props.int("height", 576, min=1)

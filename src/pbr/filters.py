@@ -17,11 +17,11 @@ from .plugins.registry import Registry
 FILTERS = Registry("rfilter")
 
 
-
 class Filter:
+    """A separable pixel filter: ``eval`` its value, ``sample1`` one axis's offset."""
+
     name = ""
     radius = 0.5
-
 
     def eval(self, x):
         raise NotImplementedError
@@ -39,6 +39,15 @@ class Filter:
 
 @FILTERS.register("box")
 class BoxFilter(Filter):
+    """``box``: a constant over [-radius, radius].
+
+    ======  =====  =======  ===================
+    name    type   default  meaning
+    ======  =====  =======  ===================
+    radius  float  0.5      half-width (pixels)
+    ======  =====  =======  ===================
+    """
+
     name = "box"
 
     def __init__(self, props):
@@ -54,6 +63,15 @@ class BoxFilter(Filter):
 
 @FILTERS.register("tent")
 class TentFilter(Filter):
+    """``tent``: a triangle over [-radius, radius], sampled exactly.
+
+    ======  =====  =======  ===================
+    name    type   default  meaning
+    ======  =====  =======  ===================
+    radius  float  1        half-width (pixels)
+    ======  =====  =======  ===================
+    """
+
     name = "tent"
 
     def __init__(self, props):
@@ -72,7 +90,15 @@ class TentFilter(Filter):
 
 @FILTERS.register("gaussian")
 class GaussianFilter(Filter):
-    """exp(-x^2 / 2 sigma^2) minus its value at the radius 4 sigma (so it reaches 0)."""
+    """``gaussian``: exp(-x^2 / 2 sigma^2) minus its value at the radius 4 sigma (so it
+    reaches 0), sampled as a truncated normal.
+
+    ======  =====  =======  ==============
+    name    type   default  meaning
+    ======  =====  =======  ==============
+    stddev  float  0.5      sigma (pixels)
+    ======  =====  =======  ==============
+    """
     name = "gaussian"
 
     def __init__(self, props):
@@ -84,7 +110,6 @@ class GaussianFilter(Filter):
         # Sampling density: the normal distribution truncated to [-radius, radius].
         self._erf_r = math.erf(self.radius / (self.stddev * math.sqrt(2.0)))
         self._norm = self.stddev * math.sqrt(2.0 * math.pi) * self._erf_r
-
 
     def eval(self, x):
         return dr.maximum(0.0, dr.exp(self._alpha * x * x) - self._bias)

@@ -80,8 +80,14 @@ def _isotropic(props):
 
 @PHASE_TYPES.register("hg")
 def _henyey_greenstein(props):
-    """``hg``: ``g`` (float, default 0.8), the mean cosine, in [-1, 1] (clamped to
-    +-G_MAX when evaluated)."""
+    """``hg``: the Henyey-Greenstein phase function.
+
+    ====  =====  =======  ============================================
+    name  type   default  meaning
+    ====  =====  =======  ============================================
+    g     float  0.8      mean cosine, in [-1, 1] (clamped to +-G_MAX)
+    ====  =====  =======  ============================================
+    """
     return HG, props.float("g", 0.8, min=-1.0, max=1.0)
 
 

@@ -28,6 +28,16 @@ def seed_array(seed) -> mi.UInt32:
 
 @SAMPLERS.register("independent")
 class IndependentSampler:
+    """``independent``: uniform random numbers from one PCG32 stream per camera sample.
+
+    ============  ====  =======  ==================================================
+    name          type  default  meaning
+    ============  ====  =======  ==================================================
+    sample_count  int   4        samples per pixel
+    seed          int   0        accepted (renders take their seed from pbr.render)
+    ============  ====  =======  ==================================================
+    """
+
     def __init__(self, props: Props | None = None):
         self.sample_count = props.int("sample_count", 4, min=1) if props else 4
         self.seed = props.int("seed", 0) if props else 0

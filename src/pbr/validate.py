@@ -1,4 +1,4 @@
-"""Statistical comparison of Monte Carlo renders (the test in DESIGN.md, "Validation").
+"""Statistical comparison of Monte Carlo renders (the test in docs/architecture.md, "Validation").
 
 Two renderers that estimate the same image differ only by noise; a biased one differs
 by more. To tell the two apart, each image is estimated from ``batches`` independent

@@ -51,7 +51,7 @@ class BSDFSet:
         return len(self.entries) - 1
 
     def _add_blend(self, loader, props) -> int:
-        """Mitsuba's ``blendbsdf`` / pbrt-v4's ``mix``: f = (1 - w) f_0 + w f_1; sampling
+        """``blendbsdf`` (Mitsuba's) / ``mix`` (pbrt-v4's): f = (1 - w) f_0 + w f_1; sampling
         reports the mixture's pdf.
 
         ==========  =======  =======  ===============================
@@ -78,7 +78,7 @@ class BSDFSet:
         return len(self.entries) - 1
 
     def _add_perturbed(self, loader, props) -> int:
-        """Mitsuba's ``normalmap`` / ``bumpmap``: the nested BSDF in a perturbed shading frame.
+        """``normalmap`` / ``bumpmap`` (Mitsuba's): the nested BSDF in a perturbed shading frame.
 
         ======================  =======  =======  ===============================================
         name                    type     default  meaning
@@ -101,7 +101,7 @@ class BSDFSet:
         return len(self.entries) - 1
 
     def _add_mask(self, loader, props) -> int:
-        """Mitsuba's ``mask``: light passes straight through with probability 1 - opacity.
+        """``mask`` (Mitsuba's): light passes straight through with probability 1 - opacity.
 
         =======  =======  =======  =============================================
         name     type     default  meaning
@@ -125,8 +125,8 @@ class BSDFSet:
         return len(self.entries) - 1
 
     def _add_twosided(self, loader, props) -> int:
-        """Mitsuba's ``twosided``: the back side uses the second nested BSDF, or the first one
-        mirrored.
+        """``twosided`` (Mitsuba's): the back side uses the second nested BSDF, or the first
+        one mirrored.
 
         =================  ====  =======  =============================
         name               type  default  meaning

@@ -1,22 +1,6 @@
-"""``area``: a diffuse emitter attached to a shape, one-sided (it emits on the side its
-normal points to, as Mitsuba's ``area``).
-
-An emitter on a triangle mesh (``obj``, ``ply``, ``cube``: any ``mi.Mesh`` but a
-rectangle) is *one light per triangle*, as in pbrt-v4: the light samplers see every
-triangle with its own power and bounds, so a large emissive mesh is sampled where it
-matters. A triangle is sampled uniformly by area with pbr's own code from the mesh's
-vertex arrays; the light of a hit on such a mesh is the mesh's first light plus the hit's
-``prim_index`` (:meth:`pbr.lights.LightSet.light_of_hit`). Other shapes are one light
-each: a rectangle is sampled uniformly by pbr's code from its corners (so that scenes with
-many emitting rectangles need no call per shape), disks, spheres and cylinders through
-Mitsuba's ``shape.sample_position``. Either way the solid-angle density of a point is
-``dist^2 / (|cos theta_g| A)`` with the geometric normal; the side
-that emits follows the shading normal (as the radiance seen at a hit does). Normals
-follow Mitsuba's orientation (``flip_normals`` on Mitsuba's own meshes flips the normals,
-not the winding).
-
-Local light indices of the family number these *sub-lights*: instance ``i`` (one per
-emitter) owns ``count(i)`` consecutive ones from ``first(i)``.
+"""``area``: a one-sided diffuse emitter attached to a shape; on a triangle mesh one light
+per triangle (pbrt-v4), so that the light samplers see each with its power and bounds.
+Sampling and bounds: docs/lights.md.
 """
 
 from __future__ import annotations
@@ -80,6 +64,16 @@ def _shape_normal_cone(shape):
 
 @LIGHT_TYPES.register("area")
 class AreaLight(LightType):
+    """``area`` (on a shape): uniform emission from the front of the surface (a triangle mesh
+    is one light per triangle).
+
+    ========  =======  =======  =================================================================
+    name      type     default  meaning
+    ========  =======  =======  =================================================================
+    radiance  texture  1        emitted radiance (RGB: times D65, as Mitsuba's spectral variants)
+    ========  =======  =======  =================================================================
+    """
+
     name = "area"
 
     def add(self, loader, props, shape_index=None) -> int:

@@ -8,6 +8,10 @@ position or direction (no MIS with BSDF sampling). ``pdf_Li`` gives the same den
 surface point (area lights) or a direction (infinite lights) found by BSDF sampling.
 ``L`` is the radiance an area light emits at a surface hit; ``Le`` the radiance an
 infinite light sends along an escaped ray.
+
+Below the interface: the helpers several families share (emission spectra, photometric
+``scale``/``power``, light frames, per-instance vector tables, pbrt-v4 light bounds) and
+:class:`DeltaPositionLight`, the base of the lights at a point.
 """
 
 from __future__ import annotations
@@ -211,7 +215,15 @@ def max_value(textures, slot: int) -> float:
 
 
 class DeltaPositionLight(LightType):
-    """Common machinery: per-instance position, spectrum slot and scale factor."""
+    """Common machinery of the lights at a point (``point``, ``spot``, ``projector``,
+    ``projection``, ``goniometric``): per-instance position, spectrum slot and scale factor.
+
+    Every such light samples the single direction toward the light with ``pdf = 1``
+    (``delta = True``: the integrator skips MIS and multiplies by the light sampler's
+    probability); radiance ``L = I(w) / d^2``; lanes where the light sends nothing get
+    ``pdf = 0`` so that no shadow ray is traced. ``pdf_Li`` is 0 (BSDF sampling never hits
+    a delta light).
+    """
 
     delta = True
 

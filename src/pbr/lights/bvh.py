@@ -1,31 +1,6 @@
-"""The light BVH of pbrt-v4 (``BVHLightSampler``): many-light sampling by importance.
-
-Every light with finite bounds is summarised by pbrt-v4's ``LightBounds``: an
-axis-aligned box around its emitting points, its power ``phi``, a cone of normal
-directions (axis ``w``, half-angle ``theta_o``) and the angle ``theta_e`` beyond the
-normals over which it still emits (pi/2 for diffuse surfaces), and whether it emits on
-both sides. A binary tree over the lights stores the union of these bounds in each node.
-Sampling descends the tree from the root: at each interior node a child is chosen with
-probability proportional to its *importance* for the shading point (power over squared
-distance, reduced by how far the shading point lies outside the node's emission cone and
-by the angle to the surface normal), so the probability of a light is the product of the
-choices on its root-to-leaf path. ``pmf`` walks the same path, guided by a per-light bit
-trail (bit ``d``: which child was taken at depth ``d``), and multiplies the same ratios.
-Lights without bounds (infinite lights) are chosen uniformly with probability
-``p_inf = n_inf / (n_inf + 1)`` (``1`` when the tree is empty), as pbrt-v4 does; lights
-of zero power are left out of the tree and never chosen.
-
-Construction (once per scene, in numpy, level by level: all nodes of one depth are split
-together) follows pbrt-v4's modified surface area heuristic: 12 buckets along each axis
-of the centroid box, the cost of a split being, for each side, power x solid-angle
-measure of the side's emission cone x surface area of its box, scaled by the ratio of the
-node's longest extent to the extent along the split axis. Where pbrt merges normal cones
-one light at a time, a node's cone here is the tighter of two cones that both contain
-every member's cone: one around the normalised sum of the members' axes, and pbrt's
-merge of the two children's cones (computed bottom-up). Nodes are stored as float32
-Dr.Jit arrays (three 4-vectors and one word each; the children of a node are adjacent);
-the tree depth is limited to 32 so that a bit trail fits a 32-bit word (below a depth
-where the SAH could exceed it, nodes are split at the median).
+"""The light BVH of pbrt-v4 (``BVHLightSampler``): many-light sampling by importance,
+over pbrt-v4's ``LightBounds`` of every finite light. The bounds, the importance and
+the tree: docs/lights.md.
 """
 
 from __future__ import annotations

@@ -1,19 +1,5 @@
-"""``directional`` (Mitsuba; pbrt-v4's ``distant`` is the same light): parallel light
-along one direction, a Dirac delta in direction.
-
-Parameters: ``irradiance`` (W/m^2 on a surface facing the light; RGB in the
-illuminant form; not spatially varying), the propagation direction as ``direction`` or
-as local +z of ``to_world`` (Mitsuba), and pbrt-v4's ``scale`` and photometric
-``illuminance`` (the irradiance is rescaled so that its luminance, RGB multiplier
-excluded as pbrt-v4's ``SpectrumToPhotometric``, equals it). ``distant`` also takes
-pbrt-v4's ``L`` (for ``irradiance``) and ``from``/``to`` (light travels from ``from``
-toward ``to``; default (0,0,0) -> (0,0,1)).
-
-Light samples point against the propagation direction ``d``; the shadow ray runs to
-``p = ref - 2 r d`` with ``r`` the larger of the scene's bounding-sphere radius and the
-distance from its centre to ``ref`` (Mitsuba's choice), so it crosses the whole scene.
-Power ``pi r^2 E`` (pbrt-v4). It has no LightBounds (``None``: treated as infinite by
-the BVH sampler) and contributes nothing to escaped rays.
+"""``directional`` (Mitsuba; pbrt-v4's ``distant``): parallel light along one direction,
+a Dirac delta in direction. Units and emission: docs/lights.md.
 """
 
 from __future__ import annotations
@@ -40,6 +26,20 @@ def scene_sphere(scene):
 
 @LIGHT_TYPES.register("directional")
 class DirectionalLight(LightType):
+    """``directional`` (Mitsuba's): light arriving from one direction, from infinitely far.
+
+    ===========  =========  ========  ===================================================
+    name         type       default   meaning
+    ===========  =========  ========  ===================================================
+    irradiance   spectrum   1         irradiance on a plane facing the light (W/m^2)
+    direction    vector     -         the direction the light travels (or to_world's +z)
+    to_world     transform  identity  instead of direction
+    scale        float      1         factor on the spectrum
+    illuminance  float      -         pbrt-v4's target illuminance: rescales the spectrum
+    L, from, to  -          -         ``distant`` only (see DistantLight)
+    ===========  =========  ========  ===================================================
+    """
+
     name = "directional"
     delta = True
     pbrt_names = False
@@ -125,6 +125,9 @@ class DirectionalLight(LightType):
 
 @LIGHT_TYPES.register("distant")
 class DistantLight(DirectionalLight):
-    """pbrt-v4's ``distant``: also takes ``L`` and ``from``/``to``."""
+    """``distant`` (pbrt-v4's): ``directional`` that also takes ``L`` (instead of
+    ``irradiance``) and ``from``/``to`` (instead of ``direction``: default from (0, 0, 0)
+    to (0, 0, 1)).
+    """
     name = "distant"
     pbrt_names = True

@@ -28,6 +28,16 @@ from .base import LIGHT_TYPES, LightType, LightSample, LeSample
 
 @LIGHT_TYPES.register("directionalarea")
 class DirectionalAreaLight(LightType):
+    """``directionalarea`` (Mitsuba's, on a shape): the surface emits along its normal only.
+
+    ========  =======  =======  ===========================================
+    name      type     default  meaning
+    ========  =======  =======  ===========================================
+    radiance  texture  1        emitted radiance
+    to_world  -        -        not accepted: the shape's transform is used
+    ========  =======  =======  ===========================================
+    """
+
     name = "directionalarea"
     delta = True
     surface = True     # attached to a shape (as ``area``)

@@ -1,21 +1,5 @@
-"""``goniometric`` (pbrt-v4): a point light whose intensity over directions is an image.
-
-``I(w) = scale * I_spectrum * Y(uv(w))``: ``I`` is a spectrum (RGB in the illuminant
-form; default the unit-luminance D65 illuminant), ``Y`` the image given by ``filename``
-(or an (H, W[, C]) array ``data``), reduced to one channel by averaging R, G, B as
-pbrt-v4 does, and looked up at the nearest texel (clamped).
-
-Directions are taken in the light's frame (``to_world``) with local +y as the pole, as
-pbrt-v4 (which swaps y and z). ``mapping``:
-
-* ``equalarea`` (pbrt-v4, the default for square images): Clarberg's equal-area
-  octahedral square; ``u < 1/2`` holds the local -x half of space, ``v < 1/2`` the -z half,
-  the square's centre is +y and its corners -y. Every texel covers the same solid angle.
-* ``equirect`` (pbrt-v3; the default for non-square images): latitude-longitude,
-  ``u = atan2(z, x) / 2 pi`` (in [0, 1)), ``v = acos(y) / pi`` (row 0 is +y).
-
-Power ``4 pi scale I_v mean(Y)`` (the mean over solid angle); pbrt-v4's photometric
-``power`` sets the total emitted power.
+"""``goniometric`` (pbrt-v4): a point light whose intensity over directions is an image
+(equal-area or equirectangular). Mapping and units: docs/lights.md.
 """
 
 from __future__ import annotations
@@ -117,6 +101,22 @@ def _solid_angle_mean(img: np.ndarray, mapping: int) -> float:
 
 @LIGHT_TYPES.register("goniometric")
 class GoniometricLight(DeltaPositionLight):
+    """``goniometric`` (pbrt-v4's): a point light whose intensity over directions is an
+    image.
+
+    ========  =========  =========  ========================================================
+    name      type       default    meaning
+    ========  =========  =========  ========================================================
+    I         spectrum   1          intensity spectrum, times the image
+    filename  string     -          the image (or data: an (H, W) array)
+    mapping   string     see right  'equalarea' (square images: the default) or 'equirect'
+    to_world  transform  identity   light-to-world frame (the light looks down +z)
+    scale     float      1          pbrt-v4's factor on the emitted spectrum
+    power     float      -          pbrt-v4's total emitted power (W): rescales the spectrum
+                                    (photometric: its luminance without the RGB multiplier)
+    ========  =========  =========  ========================================================
+    """
+
     name = "goniometric"
 
     def add(self, loader, props, shape_index=None) -> int:

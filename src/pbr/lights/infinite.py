@@ -1,63 +1,6 @@
-"""Infinitely distant lights: ``constant``, ``envmap`` (Mitsuba 3) and ``portalenvmap``
-(pbrt-v4's portal-restricted image light, on Mitsuba's environment-map conventions).
-
-All three are ``infinite`` families: rays that leave the scene receive ``Le`` and the
-integrator weights them by MIS with ``pdf_Le_dir``, the solid-angle density with which
-``sample_Li`` picks that direction. ``sample_Li`` puts the light "point" at
-``2 max(R, |p - c|)`` along the direction from the reference point ``p`` (``c``, ``R``:
-the bounding sphere of the scene's bounding box, as Mitsuba's ``set_scene``), so shadow
-rays span the scene; samples are never delta.
-
-``constant``
-    Mitsuba's uniform background: ``radiance`` (spatially constant; RGB and floats in the
-    illuminant form, i.e. times D65, as every Mitsuba emitter), sampled uniformly over
-    the sphere.
-
-``envmap``
-    Mitsuba's latitude-longitude environment map: ``filename``, or ``bitmap`` (an
-    ``mi.Bitmap`` or an (H, W, C) array; pbr also accepts the array as ``data``),
-    ``scale``, ``to_world`` (a rotation, optionally with a uniform scale) and
-    ``mis_compensation``. Conventions follow Mitsuba 3.9 exactly:
-
-    * a local direction ``d`` maps to ``u = atan2(d.x, -d.z) / 2 pi`` (wrapped to [0, 1)),
-      ``v = acos(d.y) / pi``; the image's top row looks along +y;
-    * columns are texel-centred and periodic in u (texel ``i`` at ``u = (i + 1/2) / W``),
-      rows are corner-aligned in v (row ``j`` at ``v = j / (H - 1)``, clamped);
-    * each texel's RGB becomes ``(sigmoid coefficients of rgb / (2 max rgb), 2 max rgb)``;
-      a lookup interpolates the four corners' sigmoid spectra and their scales
-      *separately* (bilinearly) and multiplies them, then by ``scale`` and D65;
-    * images smaller than 2x3 are padded by edge replication.
-
-    Sampling (pbr's own scheme, not Mitsuba's bilinear hierarchical warp): a 2D
-    distribution that is piecewise constant *in solid angle* over the W x (H - 1)
-    latitude-longitude cells between texel centres, each cell weighted by the mean
-    luminance of the bilinear image over it times its solid angle (the integral of
-    sin(theta)). A row is chosen from a marginal CDF and a column from that row's
-    conditional CDF (binary searches); inside the cell, phi is uniform and cos(theta)
-    uniform, so the density is the cell's probability over its solid angle, finite at
-    the poles.
-
-``portalenvmap``
-    pbrt-v4's ``PortalImageInfiniteLight`` idea with the ``envmap`` image and parameters
-    plus ``portal``: four points ``p0..p3`` of a rectangle (pbrt's order and frame:
-    x along ``p3 - p0``, y along ``p1 - p0``, the environment lies on the side of
-    ``(p3 - p0) x (p1 - p0)``). Its radiance along a direction is exactly the
-    ``envmap`` radiance, but only on rays whose origin is behind the portal and that
-    pass through it (pbrt's ``Le``); so in a room whose only opening is the portal it
-    renders the same image as the plain ``envmap`` while sampling only directions that
-    can get through. Directions are parameterised by the rectified angles
-    ``a = atan2(w.x, w.z) / pi + 1/2``, ``b = atan2(w.y, w.z) / pi + 1/2`` in the portal
-    frame, in which the portal seen from any point is an axis-aligned window; a
-    piecewise-constant density over an N x N grid in (a, b) (luminance times the
-    Jacobian ``d omega / d(a, b) = pi^2 (1 + tan^2 alpha)(1 + tan^2 beta) / R^3``,
-    supersampled) is sampled inside the window exactly, with a float64 summed-area table
-    (marginal in b) and per-row prefix sums (conditional in a), each inverted by a
-    binary search over grid lines and a linear solve inside the cell. pbrt-v4 resamples
-    an equal-area image into the rectified grid and looks radiance up there; here the
-    grid only drives sampling, radiance comes from the latitude-longitude image. Named
-    ``portalenvmap`` (not pbrt's ``infinite``) because its image is Mitsuba's
-    latitude-longitude map, not pbrt's equal-area one. Its ``Le`` and ``pdf_Le_dir``
-    take the ray origin (``needs_ref``).
+"""Infinite lights: ``constant``, ``envmap`` (Mitsuba's latitude-longitude map, sampled by
+luminance) and ``portalenvmap`` (pbrt-v4's portal light). They are evaluated on rays
+that leave the scene; every convention follows Mitsuba 3.9: docs/lights.md.
 """
 
 from __future__ import annotations
@@ -209,6 +152,15 @@ def _infinite_pdf_Le(self, idx, p, n, d, active):
 
 @LIGHT_TYPES.register("constant")
 class ConstantLight(LightType):
+    """``constant`` (Mitsuba's): the same radiance from every direction.
+
+    ========  ========  =======  ================================
+    name      type      default  meaning
+    ========  ========  =======  ================================
+    radiance  spectrum  1        radiance (not spatially varying)
+    ========  ========  =======  ================================
+    """
+
     name = "constant"
     infinite = True
 
@@ -254,6 +206,21 @@ class ConstantLight(LightType):
 
 @LIGHT_TYPES.register("envmap")
 class EnvMapLight(LightType):
+    """``envmap`` (Mitsuba's): an environment map (latitude-longitude, linear RGB), sampled
+    in proportion to its luminance.
+
+    ================  =========  ========  =====================================================
+    name              type       default   meaning
+    ================  =========  ========  =====================================================
+    filename          string     -         the image (one of filename, bitmap, data)
+    bitmap            mi.Bitmap  -         an image in memory
+    data              array      -         an (H, W, C) array
+    scale             float      1         factor on the radiance
+    to_world          transform  identity  rotation of the map (Mitsuba's convention: +y up)
+    mis_compensation  bool       false     sample a map with its mean subtracted (Karlik et al.)
+    ================  =========  ========  =====================================================
+    """
+
     name = "envmap"
     infinite = True
     emits_rays = True                  # light tracing: sample_Le / pdf_Le
@@ -469,6 +436,19 @@ class EnvMapLight(LightType):
 
 @LIGHT_TYPES.register("portalenvmap")
 class PortalEnvMapLight(EnvMapLight):
+    """``portalenvmap`` (pbrt-v4's ``portal``): an environment map seen through a rectangular
+    portal, sampled within the portal's solid angle.
+
+    ========  =========  ========  ======================================================
+    name      type       default   meaning
+    ========  =========  ========  ======================================================
+    portal    array      -         the rectangle's corners p0, p1, p2, p3 (4x3, required)
+    filename  string     -         the image (or bitmap, data), as envmap's
+    scale     float      1         factor on the radiance
+    to_world  transform  identity  rotation of the map
+    ========  =========  ========  ======================================================
+    """
+
     name = "portalenvmap"
     needs_ref = True   # Le and pdf_Le_dir depend on the ray origin
     emits_rays = False  # no sample_Le: its emission depends on the ray origin

@@ -1,18 +1,7 @@
-"""``point``: an isotropic point light (Mitsuba's ``point``).
-
-Parameters: ``intensity`` (W/sr; a spectrum, RGB in the illuminant form as Mitsuba),
-``position`` or ``to_world`` (only its translation), and pbrt-v4's photometric
-``scale`` (a multiplier) and ``power`` (total emitted power: the intensity is rescaled
-so that ``4 pi I_v = power``, where ``I_v`` is the luminance of the intensity spectrum
-without its RGB multiplier, exactly as pbrt-v4's ``SpectrumToPhotometric``; unlike
-pbrt-v4 the spectrum is *not* normalised when ``power`` is absent, as in Mitsuba).
-
-Every delta light samples the single direction toward the light with ``pdf = 1``
-(``delta = True``: the integrator skips MIS and multiplies by the light sampler's
-probability); radiance ``L = I(w) / d^2``; lanes where the light sends nothing get
-``pdf = 0`` so that no shadow ray is traced. ``pdf_Li`` is 0 (BSDF sampling never hits
-a delta light).
-"""
+"""``point``: an isotropic point light (Mitsuba's ``point``). pbrt-v4's photometric
+``power`` rescales the intensity so that ``4 pi I_v = power`` (``I_v``: the luminance of
+the spectrum without its RGB multiplier, as pbrt-v4's ``SpectrumToPhotometric``); unlike
+pbrt-v4 the spectrum is *not* normalised when ``power`` is absent, as in Mitsuba."""
 
 from __future__ import annotations
 
@@ -29,6 +18,20 @@ from .base import (LIGHT_TYPES, DeltaPositionLight, LightSample, light_frame, lo
 
 @LIGHT_TYPES.register("point")
 class PointLight(DeltaPositionLight):
+    """``point``: an isotropic point light (Mitsuba's). ``L = I / d^2``.
+
+    =========  =========  ========  ========================================================
+    name       type       default   meaning
+    =========  =========  ========  ========================================================
+    intensity  spectrum   1         radiant intensity (W/sr); not spatially varying
+    position   point      -         the light's position (instead of to_world)
+    to_world   transform  identity  only its translation is used
+    scale      float      1         pbrt-v4's factor on the emitted spectrum
+    power      float      -         pbrt-v4's total emitted power (W): rescales the spectrum
+                                    (photometric: its luminance without the RGB multiplier)
+    =========  =========  ========  ========================================================
+    """
+
     name = "point"
 
     def add(self, loader, props, shape_index=None) -> int:

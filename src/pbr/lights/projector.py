@@ -1,29 +1,6 @@
-"""Image-projecting delta lights: Mitsuba's ``projector`` and pbrt-v4's ``projection``.
-
-Both sit at the origin of ``to_world`` and project an image through a pinhole along
-local +z, with Mitsuba's perspective-camera pixel mapping (image column 0 toward local
-+x, row 0 toward +y, so that ``to_world = look_at(...)`` shows the image unmirrored,
-as Mitsuba's and pbrt-v4's own look-at conventions do). For a local direction ``(x, y, z)``
-
-    u = 1/2 - x / (2 z tan_x),   v = 1/2 - y / (2 z tan_y),   tan_y = tan_x / aspect
-
-where ``aspect`` is the image's width / height, and nothing is emitted outside
-``[0, 1]^2`` or behind the light.
-
-``projector`` (Mitsuba): ``irradiance`` (a spectrum or texture; RGB values in the
-illuminant form, but texture plugins such as ``bitmap`` are evaluated as they are, i.e.
-as reflectance-type spectra without D65, exactly as Mitsuba's ``get_emissive_texture``),
-``scale``, ``fov`` / ``fov_axis`` / ``focal_length`` (default 50mm) as Mitsuba's
-perspective camera. Intensity ``I(w) = pi scale E(uv) / cos^3(theta)``, so that a
-constant irradiance projects as irradiance ``pi scale E`` onto the plane ``z = 1``.
-Power ``pi scale A mean(E)`` with ``A = 4 tan_x tan_y`` (the image's area on ``z = 1``).
-
-``projection`` (pbrt-v4): ``filename`` (an RGB image, the illuminant form), ``fov``
-(default 90, along the image's shorter axis), ``scale``; ``I(w) = scale E(uv)`` with
-nearest-texel lookups, power ``scale A mean(E cos^3)``.
-
-Both accept pbrt-v4's photometric ``power`` (total emitted power from the image's
-luminance).
+"""Image-projecting delta lights: Mitsuba's ``projector`` and pbrt-v4's ``projection``, a
+pinhole at the origin of ``to_world`` projecting along local +z with the perspective
+camera's pixel mapping. Radiometry of each: docs/lights.md.
 """
 
 from __future__ import annotations
@@ -62,6 +39,23 @@ def _is_texture_plugin(loader, v) -> bool:
 
 @LIGHT_TYPES.register("projector")
 class ProjectorLight(DeltaPositionLight):
+    """``projector`` (Mitsuba's): a pinhole projecting an image.
+
+    ============  =========  ========  ========================================================
+    name          type       default   meaning
+    ============  =========  ========  ========================================================
+    irradiance    texture    1         the projected image (a bitmap texture), or a spectrum
+    fov           float      -         field of view (degrees; default: a 50 mm focal length)
+    fov_axis      string     'x'       axis of fov, as the perspective camera's
+    focal_length  string     '50mm'    instead of fov
+    filename      -          -         ``projection`` only
+    to_world      transform  identity  light-to-world frame (the light looks down +z)
+    scale         float      1         pbrt-v4's factor on the emitted spectrum
+    power         float      -         pbrt-v4's total emitted power (W): rescales the spectrum
+                                       (photometric: its luminance without the RGB multiplier)
+    ============  =========  ========  ========================================================
+    """
+
     name = "projector"
     pbrt = False   # pbrt-v4's radiometry and parameters (``projection``)
 
@@ -167,6 +161,19 @@ class ProjectorLight(DeltaPositionLight):
 
 @LIGHT_TYPES.register("projection")
 class ProjectionLight(ProjectorLight):
-    """pbrt-v4's ``projection``."""
+    """``projection`` (pbrt-v4's): a pinhole projecting an image file, with pbrt-v4's
+    radiometry.
+
+    ========  =========  ========  ========================================================
+    name      type       default   meaning
+    ========  =========  ========  ========================================================
+    filename  string     -         the image (required)
+    fov       float      90        field of view of the image's shorter side (degrees)
+    to_world  transform  identity  light-to-world frame (the light looks down +z)
+    scale     float      1         pbrt-v4's factor on the emitted spectrum
+    power     float      -         pbrt-v4's total emitted power (W): rescales the spectrum
+                                   (photometric: its luminance without the RGB multiplier)
+    ========  =========  ========  ========================================================
+    """
     name = "projection"
     pbrt = True

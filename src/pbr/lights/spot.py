@@ -1,14 +1,6 @@
-"""``spot``: Mitsuba's spot light. In its local frame it sits at the origin and shines
-along +z; ``to_world`` places it (``look_at`` is the usual way).
-
-Intensity ``I(w) = intensity * falloff(theta) * texture(uv)``: full inside
-``beam_width`` (degrees, default ``3/4 cutoff_angle``), zero beyond ``cutoff_angle``
-(default 20), and linear *in the angle* in between, as Mitsuba (pbrt-v4's ``spot`` uses a
-smoothstep in the cosine instead). The optional ``texture`` (spatially varying, e.g. a
-bitmap; a reflectance-type spectrum, as Mitsuba's ``get_texture``) is projected with
-``uv = 1/2 + 1/2 (x, y) / (z tan(cutoff_angle))`` in local coordinates. pbrt-v4's
-``scale`` multiplies the intensity; ``power`` sets the total emitted power, using the
-exact power of this falloff, ``2 pi I (1 - (sin tc - sin tb) / (tc - tb))``.
+"""``spot``: Mitsuba's spot light, shining along local +z of ``to_world`` with Mitsuba's
+falloff (linear in the angle between ``beam_width`` and ``cutoff_angle``). Emission
+and power: docs/lights.md.
 """
 
 from __future__ import annotations
@@ -33,6 +25,23 @@ def spot_solid_angle(cutoff_rad: float, beam_rad: float) -> float:
 
 @LIGHT_TYPES.register("spot")
 class SpotLight(DeltaPositionLight):
+    """``spot`` (Mitsuba's): a point light emitting into a cone with a smooth falloff,
+    optionally modulated by a texture over the cone.
+
+    ============  =========  ===========  ========================================================
+    name          type       default      meaning
+    ============  =========  ===========  ========================================================
+    intensity     spectrum   1            radiant intensity at the centre of the beam (W/sr)
+    cutoff_angle  float      20           half-angle of the cone (degrees)
+    beam_width    float      0.75 cutoff  half-angle of the full-intensity core (degrees)
+    texture       texture    -            a spatially varying texture projected over the cone
+    to_world      transform  identity     light-to-world frame (the light looks down +z)
+    scale         float      1            pbrt-v4's factor on the emitted spectrum
+    power         float      -            pbrt-v4's total emitted power (W): rescales the spectrum
+                                          (photometric: its luminance without the RGB multiplier)
+    ============  =========  ===========  ========================================================
+    """
+
     name = "spot"
 
     def add(self, loader, props, shape_index=None) -> int:

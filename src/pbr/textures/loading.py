@@ -77,6 +77,15 @@ def table_from_pairs(wl: np.ndarray, vals: np.ndarray, where: str) -> np.ndarray
 
 @TEXTURE_TYPES.register("rgb")
 def _rgb(loader, p, form, emitter, unbounded):
+    """``rgb``: an RGB colour, upsampled (Jakob-Hanika): albedo form in [0, 1], unbounded
+    form, or illuminant form times D65 (emitters).
+
+    =====  =====  =======  =====================
+    name   type   default  meaning
+    =====  =====  =======  =====================
+    value  color  -        the colour (required)
+    =====  =====  =======  =====================
+    """
     rgb = p.vector3("value")
     if form == "albedo" and (np.any(rgb < 0) or np.any(rgb > 1)):
         raise p.error("value", f"RGB reflectance must lie in [0, 1], got {rgb.tolist()}")
@@ -86,6 +95,16 @@ def _rgb(loader, p, form, emitter, unbounded):
 
 @TEXTURE_TYPES.register("spectrum")
 def _spectrum(loader, p, form, emitter, unbounded):
+    """``spectrum``: a constant, ``wavelength:value`` pairs (piecewise linear, 0 outside)
+    or a file.
+
+    ========  ===========  =======  ==================================================
+    name      type         default  meaning
+    ========  ===========  =======  ==================================================
+    value     float|pairs  -        a float, or (wavelength, value) pairs / 'l:v, ...'
+    filename  string       -        a .spd file instead
+    ========  ===========  =======  ==================================================
+    """
     textures, path = loader.textures, p.path
     if p.has("filename"):
         wl, vals = spec.read_spd(loader.resolve_path(p.string("filename"), p.key("filename")))
@@ -112,6 +131,16 @@ def _spectrum(loader, p, form, emitter, unbounded):
 
 @TEXTURE_TYPES.register("blackbody")
 def _blackbody(loader, p, form, emitter, unbounded):
+    """``blackbody``: Planck's law in W/(m^2 sr nm), unnormalised (Mitsuba's convention).
+
+    ==============  =====  =======  =================
+    name            type   default  meaning
+    ==============  =====  =======  =================
+    temperature     float  -        kelvin (required)
+    wavelength_min  float  360      0 below
+    wavelength_max  float  830      0 above
+    ==============  =====  =======  =================
+    """
     temp = p.float("temperature", min=1.0)
     lo = p.float("wavelength_min", spec.LAMBDA_MIN)
     hi = p.float("wavelength_max", spec.LAMBDA_MAX)
@@ -123,6 +152,15 @@ def _blackbody(loader, p, form, emitter, unbounded):
 
 @TEXTURE_TYPES.register("d65")
 def _d65(loader, p, form, emitter, unbounded):
+    """``d65``: the CIE D65 illuminant.
+
+    =====  =====  =======  ===============================
+    name   type   default  meaning
+    =====  =====  =======  ===============================
+    scale  float  1        factor
+    color  color  -        an RGB colour times D65 instead
+    =====  =====  =======  ===============================
+    """
     scale = p.float("scale", 1.0)
     if p.has("color"):
         rgb = p.vector3("color")
@@ -135,6 +173,14 @@ def _d65(loader, p, form, emitter, unbounded):
 
 @TEXTURE_TYPES.register("uniform")
 def _uniform(loader, p, form, emitter, unbounded):
+    """``uniform``: a constant.
+
+    =====  =====  =======  ====================
+    name   type   default  meaning
+    =====  =====  =======  ====================
+    value  float  -        the value (required)
+    =====  =====  =======  ====================
+    """
     v = p.float("value")
     p.finish()
     return loader.textures.add(ConstantSpectrum(p.path, BASE_ONE, value=mi.Float(v)))
@@ -144,6 +190,16 @@ def _uniform(loader, p, form, emitter, unbounded):
 
 @TEXTURE_TYPES.register("checkerboard")
 def _checkerboard(loader, p, form, emitter, unbounded):
+    """``checkerboard`` (Mitsuba's): two colours alternating on the unit squares of uv.
+
+    ======  =========  ========  ============================
+    name    type       default   meaning
+    ======  =========  ========  ============================
+    color0  texture    0.4       colour of the even squares
+    color1  texture    0.2       colour of the odd squares
+    to_uv   transform  identity  texture-coordinate transform
+    ======  =========  ========  ============================
+    """
     textures = loader.textures
     c0 = load_spectrum(loader, p.raw("color0", 0.4), p.key("color0"), emitter, unbounded)
     c1 = load_spectrum(loader, p.raw("color1", 0.2), p.key("color1"), emitter, unbounded)
@@ -156,6 +212,16 @@ def _checkerboard(loader, p, form, emitter, unbounded):
 
 @TEXTURE_TYPES.register("scale")
 def _scale(loader, p, form, emitter, unbounded):
+    """``scale`` (pbrt-v4's): tex * scale. The factor is a plain (unbounded, never
+    illuminant) spectrum, so that an emitter's scaled radiance carries D65 once.
+
+    =====  =======  =======  ===========
+    name   type     default  meaning
+    =====  =======  =======  ===========
+    tex    texture  1        the texture
+    scale  texture  1        the factor
+    =====  =======  =======  ===========
+    """
     # pbrt-v4's ``scale``: tex * scale. The factor is a plain (unbounded, never
     # illuminant) spectrum, so that an emitter's scaled radiance carries D65 once.
     x = load_spectrum(loader, p.raw("tex", 1.0), p.key("tex"), emitter, unbounded)
@@ -166,6 +232,16 @@ def _scale(loader, p, form, emitter, unbounded):
 
 @TEXTURE_TYPES.register("mix")
 def _mix(loader, p, form, emitter, unbounded):
+    """``mix`` (pbrt-v4's texture): (1 - amount) tex1 + amount tex2.
+
+    ======  =======  =======  ==============
+    name    type     default  meaning
+    ======  =======  =======  ==============
+    tex1    texture  0        first texture
+    tex2    texture  1        second texture
+    amount  texture  0.5      blend
+    ======  =======  =======  ==============
+    """
     # pbrt-v4's ``mix``: (1 - amount) tex1 + amount tex2 (defaults 0, 1 and 0.5).
     x = load_spectrum(loader, p.raw("tex1", 0.0), p.key("tex1"), emitter, unbounded)
     y = load_spectrum(loader, p.raw("tex2", 1.0), p.key("tex2"), emitter, unbounded)
@@ -176,6 +252,20 @@ def _mix(loader, p, form, emitter, unbounded):
 
 @TEXTURE_TYPES.register("bitmap")
 def _bitmap(loader, p, form, emitter, unbounded):
+    """``bitmap`` (Mitsuba's): an image, upsampled per texel; the spectra of the four
+    nearest texels are interpolated (bilinear).
+
+    ===========  =========  ========  ==============================================
+    name         type       default   meaning
+    ===========  =========  ========  ==============================================
+    filename     string     -         the image (or data)
+    data         array      -         an (H, W, C) array instead
+    filter_type  string     bilinear  'bilinear' or 'nearest'
+    wrap_mode    string     repeat    'repeat', 'mirror' or 'clamp'
+    raw          bool       false     keep 8-bit values as stored (no sRGB decoding)
+    to_uv        transform  identity  texture-coordinate transform
+    ===========  =========  ========  ==============================================
+    """
     filter_type = p.string("filter_type", "bilinear", choices=("bilinear", "nearest"))
     wrap_mode = p.string("wrap_mode", "repeat", choices=("repeat", "mirror", "clamp"))
     raw = p.bool("raw", False)
@@ -208,4 +298,13 @@ def _bitmap(loader, p, form, emitter, unbounded):
 
 @TEXTURE_TYPES.register("mesh_attribute")
 def _mesh_attribute(loader, p, form, emitter, unbounded):
+    """``mesh_attribute`` (Mitsuba's): a mesh's per-vertex or per-face attribute at the hit.
+
+    =====  ======  =======  ===========================================
+    name   type    default  meaning
+    =====  ======  =======  ===========================================
+    name   string  -        'vertex_*' or 'face_*' attribute (required)
+    scale  float   1        factor
+    =====  ======  =======  ===========================================
+    """
     return loader.textures.add(meshattr.load(p, form))
