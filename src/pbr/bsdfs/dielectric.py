@@ -270,17 +270,8 @@ class SmoothDielectric(_Dielectric):
 @BSDF_TYPES.register("thindielectric")
 class ThinDielectric(_Dielectric):
     """``thindielectric``: a thin dielectric slab (Mitsuba's): reflection R' = 2R / (1 + R),
-    straight transmission.
-
-    ======================  =========  =======  =========================================================
-    name                    type       default  meaning
-    ======================  =========  =======  =========================================================
-    int_ior                 float|str  'bk7'    interior IOR: a number, a Mitsuba name, a 'spectrum' or a
-                                                Sellmeier glass name (glass-BK7, ...: dispersion)
-    ext_ior                 float|str  'air'    exterior IOR (as int_ior)
-    specular_reflectance    texture    1        factor on the reflected lobe (not physical; Mitsuba's)
-    specular_transmittance  texture    1        factor on the transmitted lobe
-    ======================  =========  =======  =========================================================
+    straight transmission. Parameters: those of ``dielectric`` (int_ior, ext_ior,
+    specular_reflectance, specular_transmittance).
     """
 
     name = "thindielectric"

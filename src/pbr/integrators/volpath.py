@@ -18,6 +18,15 @@ from . import volume
 from .base import INTEGRATORS, SamplingIntegrator, depth_limit, mis_state, path_state
 
 
+def _null_weights(f, r_u, r_l, T_acc, sigma_n, sigma_maj, inv_pdf, mask):
+    """A null collision on ``mask`` lanes (in place): the weight ``f`` (throughput or
+    transmittance) and the rescaled unidirectional probability ``r_u`` by
+    ``T sigma_n / pdf``, the light-sampling one ``r_l`` by ``T sigma_maj / pdf``."""
+    f[mask] = f * T_acc * sigma_n * inv_pdf
+    r_u[mask] = r_u * T_acc * sigma_n * inv_pdf
+    r_l[mask] = r_l * T_acc * sigma_maj * inv_pdf
+
+
 class _MediumAware(SamplingIntegrator):
     """Integrators whose camera rays start in the sensor's medium."""
 
@@ -115,10 +124,7 @@ class VolPathIntegrator(_MediumAware):
         # Null scattering: continue, reweighting every wavelength.
         sigma_n = dr.maximum(sigma_maj - mp.sigma_a - mp.sigma_s, 0.0)
         pdf_n = T_acc[0] * sigma_n[0]
-        inv_n = dr.select(pdf_n > 0, dr.rcp(pdf_n), 0.0)
-        beta[is_null] = beta * T_acc * sigma_n * inv_n
-        r_u[is_null] = r_u * T_acc * sigma_n * inv_n
-        r_l[is_null] = r_l * T_acc * sigma_maj * inv_n
+        _null_weights(beta, r_u, r_l, T_acc, sigma_n, sigma_maj, dr.select(pdf_n > 0, dr.rcp(pdf_n), 0.0), is_null)
         T_acc[coll] = mi.Spectrum(1.0)
         n_null, capped = self._count_null(n_null, is_null)
         absorbed |= is_abs | capped
@@ -136,10 +142,7 @@ class VolPathIntegrator(_MediumAware):
         mp = media.eval(c.m, c.p, c.wl, coll)
         sigma_n = dr.maximum(sigma_maj - mp.sigma_a - mp.sigma_s, 0.0)
         pdf = T_acc[0] * sigma_maj[0]
-        inv = dr.select(pdf > 0, dr.rcp(pdf), 0.0)
-        T_ray[coll] = T_ray * T_acc * sigma_n * inv
-        r_l[coll] = r_l * T_acc * sigma_maj * inv
-        r_u[coll] = r_u * T_acc * sigma_n * inv
+        _null_weights(T_ray, r_u, r_l, T_acc, sigma_n, sigma_maj, dr.select(pdf > 0, dr.rcp(pdf), 0.0), coll)
         T_acc[coll] = mi.Spectrum(1.0)
         # Russian roulette on small transmittance (pbrt-v4).
         tr = T_ray * dr.rcp(dr.mean(r_l + r_u))

@@ -80,6 +80,20 @@ class MediumSet:
 
     # -- loading ---------------------------------------------------------------------
     def add(self, loader, props: Props) -> int:
+        """Parse one medium (its type's method in :data:`MEDIUM_TYPES`); returns its index.
+        Every type also takes:
+
+        ===============  =========  ========  =========================================================
+        name             type       default   meaning
+        ===============  =========  ========  =========================================================
+        Le               spectrum   -         pbrt-v4's emitted radiance (scaled by sigma_a in the RTE)
+        Lescale          float      1         factor on Le
+        g                float      -         pbrt-v4's Henyey-Greenstein asymmetry (or a nested phase
+                                              function: isotropic, hg, rayleigh; default isotropic)
+        to_world         transform  identity  frame of the grid bounds (grid media)
+        sample_emitters  bool       true      only true is supported (NEE from media)
+        ===============  =========  ========  =========================================================
+        """
         m = _Medium(props.path)
         if props.type not in MEDIUM_TYPES:
             raise props.error(None, f"unknown medium type {props.type!r} (supported: {MEDIUM_TYPES.supported()})")
@@ -164,22 +178,18 @@ class MediumSet:
         m.to_local = to_local
 
     def _homogeneous(self, loader, props, m):
-        """``homogeneous`` (Mitsuba's; or pbrt-v4's with sigma_a / sigma_s).
+        """``homogeneous`` (Mitsuba's; or pbrt-v4's with sigma_a / sigma_s). Also the
+        parameters every medium takes (see :meth:`add`).
 
-        ===============  ========  =======  =========================================================
-        name             type      default  meaning
-        ===============  ========  =======  =========================================================
-        sigma_t          spectrum  1        extinction (1/length)
-        albedo           spectrum  0.75     single-scattering albedo, in [0, 1]
-        sigma_a          spectrum  -        absorption, instead (pbrt-v4's form)
-        sigma_s          spectrum  -        scattering, with sigma_a
-        scale            float     1        factor on the coefficients
-        Le               spectrum  -        pbrt-v4's emitted radiance (scaled by sigma_a in the RTE)
-        Lescale          float     1        factor on Le
-        g                float     -        pbrt-v4's Henyey-Greenstein asymmetry (or a nested phase
-                                            function: isotropic, hg, rayleigh; default isotropic)
-        sample_emitters  bool      true     only true is supported (NEE from media)
-        ===============  ========  =======  =========================================================
+        =======  ========  =======  ====================================
+        name     type      default  meaning
+        =======  ========  =======  ====================================
+        sigma_t  spectrum  1        extinction (1/length)
+        albedo   spectrum  0.75     single-scattering albedo, in [0, 1]
+        sigma_a  spectrum  -        absorption, instead (pbrt-v4's form)
+        sigma_s  spectrum  -        scattering, with sigma_a
+        scale    float     1        factor on the coefficients
+        =======  ========  =======  ====================================
         """
         if props.has("sigma_a") or props.has("sigma_s"):
             if props.has("sigma_t") or props.has("albedo"):
@@ -194,21 +204,17 @@ class MediumSet:
         m.scale = props.float("scale", 1.0, min=0.0)
 
     def _heterogeneous(self, loader, props, m):
-        """``heterogeneous`` (Mitsuba's): coefficients times voxel grids.
+        """``heterogeneous`` (Mitsuba's): coefficients times voxel grids. Also the parameters
+        every medium takes (see :meth:`add`).
 
-        ===============  ========  =======  =============================================================
-        name             type      default  meaning
-        ===============  ========  =======  =============================================================
-        sigma_t          volume    1        extinction: a spectrum, constvolume or gridvolume (filename
-                                            or data, to_world, use_grid_bbox)
-        albedo           volume    0.75     single-scattering albedo (grids of one medium share to_world)
-        scale            float     1        factor on the coefficients
-        Le               spectrum  -        pbrt-v4's emitted radiance (scaled by sigma_a in the RTE)
-        Lescale          float     1        factor on Le
-        g                float     -        pbrt-v4's Henyey-Greenstein asymmetry (or a nested phase
-                                            function: isotropic, hg, rayleigh; default isotropic)
-        sample_emitters  bool      true     only true is supported (NEE from media)
-        ===============  ========  =======  =============================================================
+        =======  ======  =======  =============================================================
+        name     type    default  meaning
+        =======  ======  =======  =============================================================
+        sigma_t  volume  1        extinction: a spectrum, constvolume or gridvolume (filename
+                                  or data, to_world, use_grid_bbox)
+        albedo   volume  0.75     single-scattering albedo (grids of one medium share to_world)
+        scale    float   1        factor on the coefficients
+        =======  ======  =======  =============================================================
         """
         m.s1, m.g1 = self._volume(loader, props, "sigma_t", 1.0, m, "unbounded")
         m.s2, m.g2 = self._volume(loader, props, "albedo", 0.75, m, "albedo")
@@ -225,24 +231,18 @@ class MediumSet:
         self._set_bounds(m, np.linalg.inv(to_world), props.path)
 
     def _uniformgrid(self, loader, props, m):
-        """``uniformgrid`` (pbrt-v4's): sigma_a and sigma_s times one density grid.
+        """``uniformgrid`` (pbrt-v4's): sigma_a and sigma_s times one density grid. Also the
+        parameters every medium takes (see :meth:`add`).
 
-        ===============  =========  =========  =========================================================
-        name             type       default    meaning
-        ===============  =========  =========  =========================================================
-        sigma_a          spectrum   1          absorption at density 1
-        sigma_s          spectrum   1          scattering at density 1
-        density          array      -          (nz, ny, nx) densities (required)
-        p0               point      (0, 0, 0)  grid bounds, in the to_world frame
-        p1               point      (1, 1, 1)
-        to_world         transform  identity   frame of the bounds
-        scale            float      1          factor on the coefficients
-        Le               spectrum   -          pbrt-v4's emitted radiance (scaled by sigma_a in the RTE)
-        Lescale          float      1          factor on Le
-        g                float      -          pbrt-v4's Henyey-Greenstein asymmetry (or a nested phase
-                                               function: isotropic, hg, rayleigh; default isotropic)
-        sample_emitters  bool       true       only true is supported (NEE from media)
-        ===============  =========  =========  =========================================================
+        =======  ========  =======  =========================================================
+        name     type      default  meaning
+        =======  ========  =======  =========================================================
+        sigma_a  spectrum  1        absorption at density 1
+        sigma_s  spectrum  1        scattering at density 1
+        density  array     -        (nz, ny, nx) densities (required)
+        p0, p1   point     0; 1     grid bounds (default the unit cube) in the to_world frame
+        scale    float     1        factor on the coefficients
+        =======  ========  =======  =========================================================
         """
         m.form = AS
         m.s1 = self._spectrum(loader, props, "sigma_a", 1.0)
@@ -255,23 +255,17 @@ class MediumSet:
         self._bounds(props, m)
 
     def _rgbgrid(self, loader, props, m):
-        """``rgbgrid`` (pbrt-v4's): RGB grids of sigma_a and sigma_s (and of Le).
+        """``rgbgrid`` (pbrt-v4's): RGB grids of sigma_a and sigma_s. Also the parameters every
+        medium takes (see :meth:`add`; here ``Le`` is an (nz, ny, nx, 3) grid, times D65).
 
-        ===============  =========  =========  ========================================================
-        name             type       default    meaning
-        ===============  =========  =========  ========================================================
-        sigma_a          array      -          (nz, ny, nx, 3) absorption (required)
-        sigma_s          array      -          (nz, ny, nx, 3) scattering (required)
-        Le               array      -          (nz, ny, nx, 3) emitted radiance (times D65)
-        p0               point      (0, 0, 0)  grid bounds
-        p1               point      (1, 1, 1)
-        to_world         transform  identity   frame of the bounds
-        scale            float      1          factor on the coefficients
-        Lescale          float      1          factor on Le
-        g                float      -          pbrt-v4's Henyey-Greenstein asymmetry (or a nested phase
-                                               function: isotropic, hg, rayleigh; default isotropic)
-        sample_emitters  bool       true       only true is supported (NEE from media)
-        ===============  =========  =========  ========================================================
+        =======  =====  =======  =========================================================
+        name     type   default  meaning
+        =======  =====  =======  =========================================================
+        sigma_a  array  -        (nz, ny, nx, 3) absorption (required)
+        sigma_s  array  -        (nz, ny, nx, 3) scattering (required)
+        p0, p1   point  0; 1     grid bounds (default the unit cube) in the to_world frame
+        scale    float  1        factor on the coefficients
+        =======  =====  =======  =========================================================
         """
         m.form = AS
         for k in ("sigma_a", "sigma_s"):
