@@ -116,6 +116,11 @@ def _check_loaded_llvm() -> None:
             "to a libLLVM >= 16 before starting Python. " + _LLVM_HELP)
 
 
+def available_backends() -> list[str]:
+    """Backends that Dr.Jit can initialise on this machine, preferred first."""
+    return [b for b in ("cuda", "llvm") if _has(b)]
+
+
 def set_backend(name: str = "auto") -> str:
     """Select "llvm", "cuda" or "auto" (CUDA if usable, else LLVM). Returns the choice."""
     global _backend
