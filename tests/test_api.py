@@ -116,3 +116,18 @@ def test_render_with_another_integrator_uses_its_light_sampler():
     assert np.array_equal(img, np.asarray(pbr.render(power, seed=1)))
     assert not np.array_equal(img, np.asarray(pbr.render(uniform, seed=1)))
     assert uniform.integrator.light_sampler.uniform and not x.light_sampler.uniform
+
+
+def test_a_medium_reference_is_not_taken_for_the_shapes_bsdf():
+    """A shape with an ``interior`` reference and no BSDF gets the medium and Mitsuba's
+    default diffuse BSDF (the loader used to take any nested reference for the BSDF:
+    "unsupported BSDF type 'homogeneous'")."""
+    d = pbr.cornell_box(8, 2)
+    d["fog"] = {"type": "homogeneous", "sigma_t": 1.0}
+    d["small-box"]["interior"] = {"type": "ref", "id": "fog"}
+    del d["small-box"]["bsdf"]
+    d["integrator"] = {"type": "volpath"}
+    scene = pbr.load_dict(d)
+    s = scene.shape_ids.index("small-box")
+    assert np.array(scene.shape_interior)[s] == 1
+    assert scene.bsdfs.entries[np.array(scene.shape_bsdf)[s]][0] == "diffuse"
