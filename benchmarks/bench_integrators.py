@@ -9,6 +9,19 @@ max_depth 6 = pbrt-v4's default maxdepth 5):
   it: the room is lit only by the bright ceiling patch above the light, which camera
   paths must find by BSDF sampling. Both are diffuse triangle meshes with one area
   light, so every integrator (``radiosity`` included) can render them.
+- ``caustic``: ``pbr.scenes.glass_caustic`` with a 10 cm light (its default 40 cm one
+  at the same power gives a caustic that camera paths reach easily through the
+  sphere): the caustic under a glass sphere, seen directly and through the sphere
+  (specular-diffuse-specular paths, which no BDPT strategy joins: only camera paths that
+  hit the light through the glass find them);
+- ``crack``: ``pbr.scenes.door_crack``: a room lit through a 5 cm slit from a lit
+  neighbouring room.
+  These two are where Metropolis light transport (``mlt``) should win and the Cornell
+  box where it should lose; they run ``path``, ``bdpt`` and ``mlt`` only, against a
+  ``bdpt`` reference. ``mlt``'s budget is mutations per pixel, with bootstrap samples
+  (all depths) a quarter of the mutations and pbrt-v4's 1000 chains; its scene is
+  loaded again at each budget and rendered once untimed (recording the kernels that
+  its later renders replay: pbr.freeze), as compilation is not timed.
 
 Budgets: ``spp`` doubles from 4 (``sppm``: iterations, one photon per pixel each); for
 ``radiosity`` a budget ``b`` is ``spp = b``, ``max_area = 0.48 / b`` (the patch count
@@ -20,6 +33,11 @@ of other jobs on the machine hits all alike; absolute times depend on that load
 (``os.getloadavg()`` is printed), and renders shorter than 0.2 s are timed 5 times
 (median).
 
+With ``--reps N`` every budget renders N independent images (other seeds) and a curve
+point is their mean relMSE and mean time: on ``caustic`` and ``crack`` a single image's
+relMSE jumps by 10x from one budget to the next (rare bright paths), which makes
+single-image curves useless there.
+
 Timing: each integrator first renders once at the smallest budget (kernel
 compilation, reported separately); the spp is a constant of the render kernels, so
 each new budget compiles again: Dr.Jit's kernel history gives those compile times,
@@ -28,7 +46,7 @@ radiosity's includes its solve; ``cpu_s`` is the process CPU time, the same way)
 
 Error: ``relMSE = mean over pixels and channels of (x - r)^2 / (r^2 + 0.01)``
 (``pbr.validate.relative_mse``) against the reference ``r`` = pbr's ``path`` at
-``--ref-spp`` (16 batches, cached in ``benchmarks/.cache`` under a key of the scene and
+``--ref-spp`` (``bdpt`` for caustic and crack; 16 batches, cached in ``benchmarks/.cache`` under a key of the scene and
 settings, not of pbr's code: delete it after changing the renderer) with the same max_depth;
 ``radiosity`` (all bounces) against ``path`` with max_depth -1 at half the spp.
 The reference's own noise adds ``floor = mean(var(r) / (r^2 + 0.01))`` (estimated from
@@ -43,14 +61,15 @@ where the error crosses the target, on a least-squares fit ``time = a + c budget
 the curve (steadier under load spikes). Unbiased curves that stop short of the target
 are extrapolated as 1/budget (marked ``~``). Printed for wall-clock and for CPU time:
 under other jobs' load the CPU-time ratios repeat within ~5% between runs, the
-wall-clock ones within ~50%.
+wall-clock ones within ~50%. ``mlt``'s ratios are also printed relative to ``bdpt``.
 
-Not on the curves: ``ambientocclusion`` and ``aov`` (other quantities), ``prb``
+Not on the curves: ``ambientocclusion``, ``aov``, ``depth`` and ``moment`` (other quantities), ``prb``
 (``path``'s estimator: the benchmark checks that its image equals ``path``'s), and
 the aliases ``volpathmis`` (``volpath``) and ``lightpath`` (``ptracer``).
 
     python benchmarks/bench_integrators.py [--res 64] [--max-time 2] [--ref-spp 16384]
-        [--target cornell=0.002,indirect=0.02] [--quick] [--scenes cornell,indirect]
+        [--target cornell=0.002,indirect=0.02,caustic=0.01,crack=0.01] [--quick]
+        [--scenes cornell,indirect,caustic,crack] [--reps 1]
         [--integrators path,bdpt] [--from-csv out/bench_integrators.csv]
 
 Writes ``out/bench_integrators.csv`` and, with matplotlib (``pip install -e '.[bench]'``),
@@ -80,9 +99,14 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 from bench_bdpt import MAX_DEPTH, scenes as bdpt_scenes  # noqa: E402
 
-SCENES = ("cornell", "indirect")
+SCENES = ("cornell", "indirect", "caustic", "crack")
+# The scenes where Metropolis light transport should win run only what it is compared with.
+SCENE_INTEGRATORS = {"caustic": ("path", "bdpt", "mlt"), "crack": ("path", "bdpt", "mlt")}
+# Their references are bdpt's (path's noise there is what the comparison is about).
+REFERENCE = {"caustic": "bdpt", "crack": "bdpt"}
 # Estimators whose expected image is the reference's: their error must fall as 1/time.
-UNBIASED = ("path", "volpath", "simplevolpath", "prbvolpath", "ptracer", "bdpt", "randomwalk", "simplepath")
+UNBIASED = ("path", "volpath", "simplevolpath", "prbvolpath", "ptracer", "bdpt", "randomwalk", "simplepath",
+            "prb_basic", "mlt")
 # Consistent (bias -> 0 with the budget) or biased w.r.t. full global illumination.
 BIASED = {"sppm": "consistent: the density estimate's bias shrinks with the radius",
           "radiosity": "consistent in the patch size; all bounces (reference: max_depth -1)",
@@ -90,23 +114,39 @@ BIASED = {"sppm": "consistent: the density estimate's bias shrinks with the radi
           "direct": "biased: direct light only"}
 EXCLUDED = {"ambientocclusion": "computes ambient occlusion, not radiance",
             "aov": "outputs AOV channels, not an estimate of radiance",
+            "depth": "outputs distances, not radiance",
+            "moment": "outputs moments of nested integrators (AOVs), not an estimate of radiance",
             "prb": "path's estimator (its primal pass is path's kernel): same curve"}
 BENCHED = UNBIASED + tuple(BIASED)
 REF_BATCHES = 16
 RELMSE_EPS = 1e-2
 CACHE_VERSION = 1
 # Errors at which the time-to-target ratios are read (path reaches them at the defaults).
-DEFAULT_TARGETS = {"cornell": 0.002, "indirect": 0.02}
+DEFAULT_TARGETS = {"cornell": 0.002, "indirect": 0.02, "caustic": 0.01, "crack": 0.01}
+# Integrators a new scene dict is loaded for at each budget (their settings follow it).
+RELOADED = ("radiosity", "mlt")
 
 
 def scene_dicts(res):
     """The benchmark's scenes (without integrator) at ``res`` x ``res``."""
     all_scenes = bdpt_scenes(res)
+    all_scenes["caustic"] = pbr.scenes.glass_caustic(res, light_size=0.1, radiance=480.0)
+    all_scenes["crack"] = pbr.scenes.door_crack(res)
     return {name: all_scenes[name] for name in SCENES}
 
 
-def integrator_dict(name, budget, max_depth):
+def scene_integrators(scene, integrators):
+    """The integrators that run on ``scene``, in the order given."""
+    return [n for n in integrators if n in SCENE_INTEGRATORS.get(scene, integrators)]
+
+
+def integrator_dict(name, budget, max_depth, pixels=64 * 64):
     """(integrator dict, spp) of ``name`` at ``budget``."""
+    if name == "mlt":
+        # budget mutations per pixel; bootstrap samples (all depths) a quarter of the
+        # mutations, so that the normalisation's error falls with the budget too.
+        return {"type": "mlt", "max_depth": max_depth,
+                "bootstrapsamples": max(256, pixels * budget // (4 * max(max_depth, 1)))}, budget
     if name == "radiosity":
         return {"type": "radiosity", "solver": "stochastic_jacobi", "max_area": 0.48 / budget,
                 "rays_per_iteration": (1 << 14) * budget}, budget
@@ -145,9 +185,10 @@ def timed_render(scene, spp, seed, repeat_below=0.2, repeats=5):
 
 # -- reference ---------------------------------------------------------------------------
 def reference(name, d, res, max_depth, spp, cache_dir):
-    """(mean image, variance of the mean, seconds, cached?) of ``path`` at ``spp`` in
-    16 batches, cached under a key of the scene, resolution, depth and spp."""
-    integ = {"type": "path", "max_depth": max_depth}
+    """(mean image, variance of the mean, seconds, cached?) of ``path`` (``REFERENCE``:
+    another) at ``spp`` in 16 batches, cached under a key of the scene, resolution, depth
+    and spp."""
+    integ = {"type": REFERENCE.get(name, "path"), "max_depth": max_depth}
     key = hashlib.sha1(repr((CACHE_VERSION, sorted((k, repr(v)) for k, v in d.items()), integ, spp,
                              REF_BATCHES)).encode()).hexdigest()[:12]
     f = Path(cache_dir) / f"ref_{name}_{res}_d{max_depth}_{spp}_{key}.npz"
@@ -176,7 +217,7 @@ def time_to_reach(times, errors, target):
     prev = None
     for t, e in zip(times, errors):
         if e <= target:
-            if prev is None or prev[1] <= 0 or e <= 0:
+            if prev is None or prev[1] <= 0 or e <= 0 or prev[0] <= 0 or t <= 0:
                 return t
             (t0, e0), lt = prev, math.log(target)
             w = (math.log(e0) - lt) / (math.log(e0) - math.log(e))
@@ -299,6 +340,8 @@ def parse(argv):
                     help="relMSE for the time-to-target ratios: one value, or scene=value pairs "
                          "(default " + ",".join(f"{k}={v:g}" for k, v in DEFAULT_TARGETS.items()) + ")")
     ap.add_argument("--max-depth", type=int, default=MAX_DEPTH)
+    ap.add_argument("--reps", type=int, default=1,
+                    help="independent images per budget, their relMSE averaged (heavy-tailed scenes: caustic, crack)")
     ap.add_argument("--scenes", default=",".join(SCENES))
     ap.add_argument("--integrators", default=",".join(BENCHED))
     ap.add_argument("--quick", action="store_true", help="a smoke run (< 2 min)")
@@ -377,34 +420,46 @@ def run(a):
     rows, compile_s, refs = [], {}, {}
     for sc in a.scenes:
         d = dicts[sc]
+        names = scene_integrators(sc, a.integrators)
         for depth, spp in ((a.max_depth, a.ref_spp), (-1, a.ref_spp // 2)):
-            if depth == -1 and "radiosity" not in a.integrators:
+            if depth == -1 and "radiosity" not in names:
                 continue
             ref, var, sec, cached = reference(sc, d, a.res, depth, spp, a.cache)
             refs[(sc, depth)] = (ref, floor_of(ref, var))
             print(f"[{sc}] reference max_depth {depth}: {spp} spp, {sec:.1f} s{' (cached)' if cached else ''}, "
                   f"own relMSE floor {refs[(sc, depth)][1]:.2e}", flush=True)
-        scenes = {n: load(d, integrator_dict(n, a.budgets[0], a.max_depth)[0]) for n in a.integrators
-                  if n != "radiosity"}
+        pixels = a.res * a.res
+        scenes = {n: load(d, integrator_dict(n, a.budgets[0], a.max_depth, pixels)[0]) for n in names
+                  if n not in RELOADED}
         # Warm-up: compile each integrator's kernels at the smallest budget.
-        for n in a.integrators:
-            integ, spp = integrator_dict(n, a.budgets[0], a.max_depth)
+        for n in names:
+            integ, spp = integrator_dict(n, a.budgets[0], a.max_depth, pixels)
             s = scenes[n] if n in scenes else load(d, integ)
             _, _, _, comp = timed_render(s, spp, seed=1, repeats=1)
             compile_s[(sc, n)] = [comp, comp]
-        active = list(a.integrators)
+        active = list(names)
         for level, b in enumerate(a.budgets):
             for n in list(active):
-                integ, spp = integrator_dict(n, b, a.max_depth)
+                integ, spp = integrator_dict(n, b, a.max_depth, pixels)
                 s = scenes[n] if n in scenes else load(d, integ)
-                # radiosity solves in its first render only: a repeat would time the view alone.
-                img, sec, cpu, comp = timed_render(s, spp, seed=1000 + level, repeats=1 if n == "radiosity" else 5)
-                compile_s[(sc, n)][1] += comp
+                if n == "mlt":   # its first render records the kernels it replays (untimed, as compiling)
+                    timed_render(s, spp, seed=1, repeats=1)
                 ref, floor = refs[(sc, -1 if n == "radiosity" else a.max_depth)]
-                raw = validate.relative_mse(img, ref, RELMSE_EPS)
+                # --reps independent images (other seeds): their mean relMSE and time.
+                raws, secs, cpus, means = [], [], [], []
+                for k in range(1 if n == "radiosity" else a.reps):
+                    # radiosity solves in its first render only: a repeat would time the view alone.
+                    img, sec, cpu, comp = timed_render(s, spp, seed=1000 + level + 7919 * k,
+                                                       repeats=1 if n == "radiosity" else 5)
+                    compile_s[(sc, n)][1] += comp
+                    raws.append(validate.relative_mse(img, ref, RELMSE_EPS))
+                    secs.append(sec)
+                    cpus.append(cpu)
+                    means.append(float(img.mean() / ref.mean()))
+                raw, sec, cpu = float(np.mean(raws)), float(np.mean(secs)), float(np.mean(cpus))
                 rows.append({"scene": sc, "integrator": n, "budget": b, "spp": spp, "time_s": sec, "cpu_s": cpu,
                              "relmse": raw - floor, "relmse_raw": raw, "ref_floor": floor,
-                             "mean_ratio": float(img.mean() / ref.mean()),
+                             "mean_ratio": float(np.mean(means)),
                              "kind": "unbiased" if n in UNBIASED else "biased/consistent"})
                 # path, the yardstick of the time-to-target ratios, goes on until it reaches the target.
                 yardstick = n == "path" and raw - floor > a.targets[sc]
@@ -413,7 +468,7 @@ def run(a):
             print(f"[{sc}] budget {b} done ({len(active)} integrators go on)", flush=True)
             if not active:
                 break
-        if "path" in a.integrators:
+        if "path" in names:
             print(f"[{sc}] prb vs path at {a.budgets[0]} spp, same seed: max |difference| "
                   f"{check_prb(d, a.budgets[0], a.max_depth):.3g}")
     return rows, compile_s
@@ -427,13 +482,13 @@ def read_csv(path):
         return [{k: conv.get(k, str)(v) for k, v in r.items()} for r in csv.DictReader(f)]
 
 
-def analyse(rows, scenes, integrators, targets, key="time_s"):
-    """Print the ratios (time to reach the target relMSE) / (path's), on the measured
-    curves and on fitted times (``key``: ``time_s`` wall, ``cpu_s`` CPU); returns
+def analyse(rows, scenes, integrators, targets, key="time_s", yardstick="path"):
+    """Print the ratios (time to reach the target relMSE) / (``yardstick``'s), on the
+    measured curves and on fitted times (``key``: ``time_s`` wall, ``cpu_s`` CPU); returns
     {(scene, integrator): (measured, fitted) cells}."""
     what = ("WALL-CLOCK time" if key == "time_s" else
             "CPU time (process time: the work done, steadier than wall time when other jobs load the machine)")
-    print(f"\n{what} to reach the target relMSE, relative to path (< 1: faster). 'measured': interpolated "
+    print(f"\n{what} to reach the target relMSE, relative to {yardstick} (< 1: faster). 'measured': interpolated "
           f"on the measured curve; 'fitted': at the budget where the error curve crosses the target, "
           "on a least-squares fit time = a + c budget (less sensitive to load spikes); 'not reached': within "
           "the budgets run; '~': extrapolated as 1/budget from the last budget (unbiased curves only); "
@@ -446,15 +501,16 @@ def analyse(rows, scenes, integrators, targets, key="time_s"):
         cells = []
         for sc in scenes:
             r = [x for x in rows if x["scene"] == sc and x["integrator"] == n]
-            rp = [x for x in rows if x["scene"] == sc and x["integrator"] == "path"]
+            rp = [x for x in rows if x["scene"] == sc and x["integrator"] == yardstick]
             if not r:
+                cells.append(f"{'-':>22s} {'':6s} {'':11s}")
                 continue
             pair = []
             for fn in (reach, reach_fitted):
                 t, how = fn(r, targets[sc], n in UNBIASED, key)
                 tp, how_p = fn(rp, targets[sc], True, key) if rp else (None, "")
                 if tp is None:
-                    pair.append("path: n/r")
+                    pair.append(f"{yardstick}: n/r")
                 elif t is None:
                     pair.append("not reached")
                 else:
@@ -496,7 +552,8 @@ def main(argv=None):
         dr.set_flag(dr.JitFlag.KernelHistory, True)
         print(f"bench_integrators: {a.res}x{a.res}, max_depth {a.max_depth}, budgets {a.budgets[0]}..{a.budgets[-1]} "
               f"(stop after a render > {a.max_time:g} s once {a.min_budgets} budgets are done), reference: pbr "
-              f"path {a.ref_spp} spp ({REF_BATCHES} batches; radiosity: max_depth -1, {a.ref_spp // 2} spp), "
+              f"path ({', '.join(f'{k}: {v}' for k, v in REFERENCE.items())}) {a.ref_spp} spp ({REF_BATCHES} batches; "
+              f"radiosity: max_depth -1, {a.ref_spp // 2} spp), "
               f"backend {pbr.get_backend()}")
         report_skipped()
         for n in a.integrators:
@@ -518,6 +575,9 @@ def main(argv=None):
     if all("cpu_s" in r for r in rows):
         ratios_cpu = analyse(rows, a.scenes, a.integrators, targets, key="cpu_s")
         ratios = {k: v + ratios_cpu[k] for k, v in ratios.items()}
+    if "mlt" in a.integrators and "bdpt" in a.integrators:
+        for key in ("time_s", "cpu_s") if all("cpu_s" in r for r in rows) else ("time_s",):
+            analyse(rows, a.scenes, ["mlt"], targets, key=key, yardstick="bdpt")
     warn_bias(rows, a.scenes, a.integrators)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)

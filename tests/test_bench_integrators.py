@@ -18,8 +18,14 @@ import pbr  # noqa: F401  (chooses libLLVM before Dr.Jit loads)
 from pbr.plotting import pyplot
 
 ROOT = Path(__file__).resolve().parent.parent
-ARGS = ["--quick", "--res", "16", "--budgets", "4,64", "--ref-spp", "4096", "--max-time", "1.0", "--min-budgets", "1"]
+ARGS = ["--quick", "--res", "16", "--budgets", "4,64", "--ref-spp", "4096", "--max-time", "1.0", "--min-budgets", "1",
+        "--scenes", "cornell,indirect"]
+# Not mlt: at 16 x 16 and 4 to 64 mutations per pixel (16 per chain at most) its error
+# is dominated by dark pixels that a few clumps of mutations reach (relMSE 0.26 -> 0.12
+# measured), which neither falls as 1/N yet nor separates a wrong reference (below);
+# tests/test_mlt.py tests its image.
 UNBIASED_CHECKED = ("path", "bdpt", "ptracer")
+SCENES = ("cornell", "indirect")     # every integrator runs on these
 
 
 def _bench():
@@ -46,7 +52,7 @@ def test_quick_run_lists_every_integrator(bench, quick_run):
     with open(d / "out" / "bench_integrators.csv") as f:
         table = list(csv.DictReader(f))
     assert len(table) == len(rows)
-    for sc in bench.SCENES:
+    for sc in SCENES:
         found = {r["integrator"] for r in table if r["scene"] == sc}
         assert found == set(bench.BENCHED), (sc, set(bench.BENCHED) ^ found)
     for r in table:
@@ -62,7 +68,7 @@ def test_quick_run_lists_every_integrator(bench, quick_run):
 
 def test_unbiased_errors_decrease(bench, quick_run):
     _, rows, _ = quick_run
-    for sc in bench.SCENES:
+    for sc in SCENES:
         for n in UNBIASED_CHECKED:
             r = sorted((x for x in rows if x["scene"] == sc and x["integrator"] == n), key=lambda x: x["budget"])
             assert [x["budget"] for x in r] == [4, 64], (sc, n)
@@ -75,7 +81,7 @@ def test_wrong_reference_is_detected(bench, quick_run, tmp_path):
     d, _, _ = quick_run
     cache = tmp_path / "cache"
     shutil.copytree(d / "cache", cache)
-    refs = {sc: sorted(cache.glob(f"ref_{sc}_16_d6_*.npz")) for sc in bench.SCENES}
+    refs = {sc: sorted(cache.glob(f"ref_{sc}_16_d6_*.npz")) for sc in SCENES}
     assert all(len(v) == 1 for v in refs.values()), refs
     a, b = refs["cornell"][0], refs["indirect"][0]
     tmp = a.with_suffix(".swap")
@@ -84,7 +90,7 @@ def test_wrong_reference_is_detected(bench, quick_run, tmp_path):
     tmp.rename(b)
     rows, _ = bench.main(ARGS + ["--integrators", ",".join(UNBIASED_CHECKED), "--out", str(tmp_path / "out"),
                                  "--cache", str(cache), "--no-plot"])
-    for sc in bench.SCENES:
+    for sc in SCENES:
         for n in UNBIASED_CHECKED:
             assert not bench.errors_decrease(rows, sc, n, factor=0.4), (sc, n)
 

@@ -254,3 +254,18 @@ def test_mitsuba_max_depth_minus_one_fails(reference):
     print(r)
     assert not r.passed, r
     assert r.pass_fraction < 0.995 and r.mean_ratio < 1.0
+
+
+def test_student_t_p_values():
+    """Two-sided tail probabilities of Student's t (table values) and Welch's degrees of
+    freedom; compare(dof=...) uses them, and dof=inf is the normal test."""
+    for t, dof, p in ((2.131, 15, 0.05), (2.947, 15, 0.01), (1.0, 1, 0.5), (12.706, 1, 0.05), (2.576, np.inf, 0.01)):
+        assert V._student_p(t, dof) == pytest.approx(p, rel=2e-3), (t, dof)
+    assert V.welch_dof(1.0, 16, 0.0, 16) == pytest.approx(15.0)
+    assert V.welch_dof(1.0, 9, 1.0, 9) == pytest.approx(16.0)
+    z = np.full(100, 3.0)
+    normal = V.compare(z, np.ones(100), np.zeros(100), np.zeros(100))
+    few = V.compare(z, np.ones(100), np.zeros(100), np.zeros(100), dof=4)
+    assert (few.p_values > 3 * normal.p_values).all()
+    same = V.compare(z, np.ones(100), np.zeros(100), np.zeros(100), dof=np.inf)
+    np.testing.assert_allclose(same.p_values, normal.p_values, rtol=1e-9)

@@ -27,6 +27,7 @@ from . import spectrum
 from .scene.params import SceneParameters
 from .scene.scene import Scene
 from .plugins.tables import map_tables
+from .integrators.base import SamplingIntegrator
 
 
 def scene_state(scene: Scene) -> list:
@@ -104,3 +105,7 @@ class _Frozen:
 
     def __getattr__(self, name):
         return getattr(self._frozen, name)
+
+
+# Integrators that replay their own kernels (mlt) record them with this.
+SamplingIntegrator.recorder = staticmethod(freeze)

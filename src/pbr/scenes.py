@@ -52,11 +52,12 @@ def cornell_box(resolution: int = 256, spp: int = 64) -> dict:
     }
 
 
-def glass_caustic(resolution: int = 64, spp: int = 64) -> dict:
-    """A glass sphere (IOR 1.5) on a diffuse floor under a 0.4 x 0.4 area light 1.8 above
-    it, out of the camera's view: light reaches the floor under the sphere only through
-    the glass (a caustic; it needs max_depth >= 4: camera - floor - glass - glass - light).
-    A Mitsuba-style scene dict with a box filter."""
+def glass_caustic(resolution: int = 64, spp: int = 64, light_size: float = 0.4, radiance: float = 30.0) -> dict:
+    """A glass sphere (IOR 1.5) on a diffuse floor under a square area light (side
+    ``light_size``, ``radiance``) 1.8 above it, out of the camera's view: light reaches the
+    floor under the sphere only through the glass (a caustic; it needs max_depth >= 4:
+    camera - floor - glass - glass - light), and the camera also sees the caustic through
+    the sphere. A Mitsuba-style scene dict with a box filter."""
     backend.ensure()
     T = mi.ScalarTransform4f
     return {
@@ -70,8 +71,50 @@ def glass_caustic(resolution: int = 64, spp: int = 64) -> dict:
                   "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.8, 0.8, 0.8]}}},
         "glass": {"type": "sphere", "center": [0.0, -0.6, 0.0], "radius": 0.4,
                   "bsdf": {"type": "dielectric", "int_ior": 1.5}},
-        "light": {"type": "rectangle", "to_world": T().translate([0.0, 1.2, 0.0]).rotate([1, 0, 0], 90).scale(0.2),
-                  "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [30.0, 30.0, 30.0]}}},
+        "light": {"type": "rectangle",
+                  "to_world": T().translate([0.0, 1.2, 0.0]).rotate([1, 0, 0], 90).scale(light_size / 2),
+                  "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [radiance] * 3}}},
+    }
+
+
+def door_crack(resolution: int = 64, spp: int = 64, crack: float = 0.05, light_up: bool = False) -> dict:
+    """Veach's door scene, simplified: a closed room (2 x 2 x 2, diffuse white) split by a
+    wall with a slit ``crack`` wide (from z = -0.35), an area light in the smaller part
+    facing its floor (or, ``light_up``, its ceiling), the camera in the larger part.
+    Light reaches the camera's side only through the slit, mostly after bounces in the
+    lit part: paths from the camera must find the slit and then the light. A
+    Mitsuba-style scene dict with a box filter."""
+    backend.ensure()
+    T = mi.ScalarTransform4f
+    white = {"type": "ref", "id": "white"}
+
+    def wall(tf):
+        return {"type": "rectangle", "to_world": tf, "bsdf": white}
+
+    z0, z1 = -0.35, -0.35 + crack     # the slit
+    return {
+        "type": "scene",
+        "sensor": {"type": "perspective", "fov": 60.0,
+                   "to_world": T().look_at(origin=[-0.8, 0.2, 0.95], target=[0.3, -0.3, -0.5], up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": resolution, "height": resolution,
+                            "rfilter": {"type": "box"}},
+                   "sampler": {"type": "independent", "sample_count": spp}},
+        "white": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.75, 0.75, 0.75]}},
+        "floor": wall(T().translate([0, -1, 0]).rotate([1, 0, 0], -90)),
+        "ceiling": wall(T().translate([0, 1, 0]).rotate([1, 0, 0], 90)),
+        "back": wall(T().translate([0, 0, -1])),
+        "front": wall(T().translate([0, 0, 1]).rotate([0, 1, 0], 180)),
+        "left": wall(T().translate([-1, 0, 0]).rotate([0, 1, 0], 90)),
+        "right": wall(T().translate([1, 0, 0]).rotate([0, 1, 0], -90)),
+        # The dividing wall at x = 0.3 (2 cm thick), open for z in [z0, z1].
+        "wall-back": {"type": "cube", "to_world": T().translate([0.3, 0, (z0 - 1) / 2]).scale([0.02, 1, (z0 + 1) / 2]),
+                      "bsdf": white},
+        "wall-front": {"type": "cube", "to_world": T().translate([0.3, 0, (z1 + 1) / 2]).scale([0.02, 1, (1 - z1) / 2]),
+                       "bsdf": white},
+        "light": {"type": "rectangle",
+                  "to_world": T().translate([0.65, 0.7 if light_up else 0.98, 0.5]).rotate([1, 0, 0], -90 if light_up else 90)
+                  .scale(0.25),
+                  "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [300.0, 300.0, 300.0]}}},
     }
 
 

@@ -34,7 +34,7 @@ import numpy as np
 
 __all__ = [
     "Estimate", "Result", "estimate", "compare", "compare_renders",
-    "mitsuba_variant", "mitsuba_render_fn", "mitsuba_reference", "mse", "relative_mse",
+    "mitsuba_variant", "mitsuba_render_fn", "mitsuba_reference", "mse", "relative_mse", "welch_dof",
 ]
 
 #: Seeds of one :func:`estimate` call are ``seed * SEED_STRIDE + i``: calls with different
@@ -42,6 +42,57 @@ __all__ = [
 SEED_STRIDE = 1 << 16
 
 _erfc = np.frompyfunc(math.erfc, 1, 1)
+
+
+def _beta_cf(a: float, b: float, x: float) -> float:
+    """Continued fraction of the incomplete beta function (modified Lentz)."""
+    tiny, c, d = 1e-300, 1.0, 1.0 - (a + b) * x / (a + 1.0)
+    d = 1.0 / (d if abs(d) > tiny else tiny)
+    h = d
+    for m in range(1, 300):
+        for num in (m * (b - m) * x / ((a + 2 * m - 1) * (a + 2 * m)),
+                    -(a + m) * (a + b + m) * x / ((a + 2 * m) * (a + 2 * m + 1))):
+            d = 1.0 + num * d
+            d = 1.0 / (d if abs(d) > tiny else tiny)
+            c = 1.0 + num / c
+            c = c if abs(c) > tiny else tiny
+            h *= d * c
+        if abs(d * c - 1.0) < 1e-15:
+            break
+    return h
+
+
+def _betainc(a: float, b: float, x: float) -> float:
+    """Regularised incomplete beta function I_x(a, b)."""
+    if x <= 0.0 or x >= 1.0:
+        return 0.0 if x <= 0.0 else 1.0
+    ln = math.lgamma(a + b) - math.lgamma(a) - math.lgamma(b) + a * math.log(x) + b * math.log1p(-x)
+    if x < (a + 1.0) / (a + b + 2.0):
+        return math.exp(ln) * _beta_cf(a, b, x) / a
+    return 1.0 - math.exp(ln) * _beta_cf(b, a, 1.0 - x) / b
+
+
+def _student_p(t: float, dof: float) -> float:
+    """Two-sided tail probability P(|T| >= t) of Student's t with ``dof`` degrees of freedom."""
+    if math.isnan(t) or math.isnan(dof):
+        return math.nan
+    if math.isinf(t):
+        return 0.0
+    if math.isinf(dof):
+        return math.erfc(t / math.sqrt(2.0))
+    return _betainc(0.5 * dof, 0.5, dof / (dof + t * t))
+
+
+_student = np.frompyfunc(_student_p, 2, 1)
+
+
+def welch_dof(var_a, batches_a: int, var_b, batches_b: int) -> np.ndarray:
+    """Welch-Satterthwaite degrees of freedom of ``(mean_a - mean_b) / sqrt(var_a + var_b)``
+    for variances of means estimated from ``batches_a`` and ``batches_b`` batches."""
+    va, vb = np.asarray(var_a, np.float64), np.asarray(var_b, np.float64)
+    den = va * va / (batches_a - 1) + vb * vb / (batches_b - 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(den > 0, (va + vb) ** 2 / np.where(den > 0, den, 1.0), np.inf)
 
 
 class Estimate(tuple):
@@ -153,7 +204,7 @@ def _ratio(a: float, va: float, b: float, vb: float) -> tuple[float, float]:
 def compare(mean_a, var_a, mean_b, var_b, alpha: float = 0.01, min_pass: float = 0.9975,
             ratio_sigmas: float = 3.0, ratio_atol: float = 1e-4,
             image_mean_var_a: float | None = None, image_mean_var_b: float | None = None,
-            zero_var_rtol: float = 1e-6) -> Result:
+            zero_var_rtol: float = 1e-6, dof=None) -> Result:
     """Test whether two estimated images have the same expectation (see module docstring).
 
     ``var_*`` are variances of the means (as returned by :func:`estimate`). A
@@ -162,7 +213,9 @@ def compare(mean_a, var_a, mean_b, var_b, alpha: float = 0.01, min_pass: float =
     stderr, ratio_atol)``; the floor only matters for (near-)noiseless images, where it
     absorbs float32 rounding. ``image_mean_var_*`` (variance of the image mean, e.g.
     :attr:`Estimate.image_mean_var`) override the per-pixel sum, which assumes
-    independent pixel-channels. Non-finite means fail.
+    independent pixel-channels. Non-finite means fail. ``dof`` (a number or per
+    pixel-channel, e.g. :func:`welch_dof`): take p-values from Student's t with that many
+    degrees of freedom instead of the normal distribution (variances from few batches).
     """
     ma, mb = np.asarray(mean_a, np.float64), np.asarray(mean_b, np.float64)
     va, vb = np.asarray(var_a, np.float64), np.asarray(var_b, np.float64)
@@ -185,7 +238,10 @@ def compare(mean_a, var_a, mean_b, var_b, alpha: float = 0.01, min_pass: float =
     equal = diff <= zero_var_rtol * np.maximum(np.abs(ma), np.abs(mb))
     z[zero & ~equal] = np.inf
     z[~(np.isfinite(ma) & np.isfinite(mb))] = np.nan
-    p = _erfc(z / math.sqrt(2.0)).astype(np.float64)  # two-sided normal tail; nan stays nan
+    if dof is None:
+        p = _erfc(z / math.sqrt(2.0)).astype(np.float64)  # two-sided normal tail; nan stays nan
+    else:
+        p = _student(z, np.broadcast_to(np.asarray(dof, np.float64), z.shape)).astype(np.float64)
 
     alpha_sidak = -math.expm1(math.log1p(-alpha) / n)  # 1 - (1 - alpha)^(1/n), accurately
     ok = p >= alpha_sidak

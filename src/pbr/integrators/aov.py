@@ -10,7 +10,7 @@ import mitsuba as mi
 
 from ..bsdfs.base import ShadingContext
 from .. import spectrum as spec
-from .base import INTEGRATORS, SamplingIntegrator, PRIMAL
+from .base import INTEGRATORS, SamplingIntegrator, PRIMAL, nested_integrators
 
 # AOV type -> channel suffixes (Mitsuba's aov.cpp).
 AOV_TYPES = {
@@ -53,14 +53,8 @@ class AOVIntegrator(SamplingIntegrator):
                 raise props.error("aovs", f"unknown AOV type {kind!r} in {token!r} "
                                           f"(supported: {', '.join(AOV_TYPES)})")
             self.aovs.append((name, kind))
-        self.nested = []
-        for key, child in props.children():
-            t = child["type"]
-            if t not in INTEGRATORS:
-                raise props.error(key, f"expected a nested integrator, got {t!r}")
-            if t == self.name:
-                raise props.error(key, "an 'aov' integrator cannot be nested in another")
-            self.nested.append((key, INTEGRATORS[t](props.child(key))))
+        self.nested = nested_integrators(
+            props, lambda t, _: "an 'aov' integrator cannot be nested in another" if t == self.name else None)
         props.finish()
         if not self.aovs and not self.nested:
             raise props.error("aovs", "no AOV and no nested integrator given")

@@ -43,6 +43,9 @@ class SamplingIntegrator:
     differentiable = False        # whether render_forward/render_backward are implemented
     surfaces_only = False         # whether participating media are an error
     traces_light_paths = False    # whether every emitter must emit rays (sample_Le), without media
+    # Records a function's kernels once and replays them (dr.freeze for pbr scenes): set
+    # by pbr.freeze, a layer above the integrators; None where pbr.freeze is not loaded.
+    recorder = None
 
     def __init__(self, props):
         self.path = props.path
@@ -291,6 +294,23 @@ def depth_limit(max_depth: int) -> int:
     (unlimited) becomes 2^32 - 1; otherwise paths have at most max_depth - 1 bounces
     after the camera ray (max_depth = 1 shows only directly visible emitters)."""
     return max_depth if max_depth >= 0 else 0xFFFFFFFF
+
+
+def nested_integrators(props, refuse=None) -> list:
+    """(key, integrator) of the integrators nested in ``props`` (Mitsuba's ``aov`` and
+    ``moment`` take any number, each under its own key), in order. ``refuse(type,
+    integrator)`` may return why one cannot be nested (an error naming its key)."""
+    out = []
+    for key, child in props.children():
+        t = child["type"]
+        if t not in INTEGRATORS:
+            raise props.error(key, f"expected a nested integrator, got {t!r}")
+        integrator = INTEGRATORS[t](props.child(key))
+        why = refuse(t, integrator) if refuse else None
+        if why:
+            raise props.error(key, why)
+        out.append((key, integrator))
+    return out
 
 
 def pbrt_max_depth(props, default: int = 5) -> int:

@@ -28,6 +28,12 @@ DELTA_POSITION, DELTA_DIRECTION, INFINITE_LIGHT = 1, 2, 4
 
 MAX_SAMPLES_PER_PASS = 1 << 18   # camera samples per pass (each stores its light subpath)
 
+# Random numbers the subpaths draw (``rng.next_float32()``), which MLT's primary samples
+# must hold: a light subpath 5 to start (light, position, direction) and 3 at each vertex
+# it extends (the BSDF sample); a camera subpath 6 at each vertex (light choice and
+# position for next-event estimation, then the BSDF sample).
+LIGHT_START_DIMS, LIGHT_VERTEX_DIMS, CAMERA_VERTEX_DIMS = 5, 3, 6
+
 
 class LightVertex(Struct):
     """A stored light-subpath vertex: the ray that found it (``o``, ``d``), its position
@@ -66,6 +72,45 @@ def mis_weight(sum_camera, sum_light):
     """Balance-heuristic weight of a strategy: 1 / (1 + sum of the other strategies'
     density ratios)."""
     return dr.rcp(1.0 + sum_camera + sum_light)
+
+
+class Strategies:
+    """The strategies (s, t) one BDPT evaluation computes, and the weight each gets.
+
+    ``Strategies(maxdepth)``: all of them, MIS-weighted (the BDPT estimator).
+    ``Strategies(maxdepth, s, t)``: one strategy per lane (``mi.UInt32`` s and t, per lane
+    or of width 1): pbrt-v4's MLT picks one per Markov chain and iteration, and
+    ``render_strategies`` one per image. The other strategies' work (shadow rays,
+    connections) is masked off and, with ``truncate``, the subpaths stop at the vertices
+    the strategy joins (light vertices y_0 .. y_{s-1}, camera vertices z_0 .. z_{t-1});
+    without it they keep their full length and use the same random numbers as the full
+    estimator. ``weighted=False`` drops the MIS weight (pbrt-v4's ``visualizestrategies``).
+    """
+
+    def __init__(self, maxdepth, s=None, t=None, weighted=True, truncate=True):
+        self.every = s is None
+        self.s, self.t, self.weighted = s, t, weighted
+        # Vertices each subpath needs (a number, or per lane).
+        cut = truncate and not self.every
+        self.light_max = s if cut else maxdepth + 1
+        self.camera_max = t if cut else maxdepth + 2
+
+    def wants(self, s, t):
+        """Mask of the lanes that evaluate strategy (s, t)."""
+        return True if self.every else (self.s == s) & (self.t == t)
+
+    def weight(self, s, t, w):
+        """The factor a contribution of strategy (s, t) with MIS weight ``w`` gets."""
+        w = w if self.weighted else mi.Float(1.0)
+        return w if self.every else dr.select(self.wants(s, t), w, 0.0)
+
+    def connections(self, k, s_max):
+        """(first, last) s >= 2 whose strategy joins camera vertex z_k (t = k + 1) to a stored
+        light vertex, given the last one the light subpath allows (``s_max``)."""
+        if self.every:
+            return mi.UInt32(2), s_max
+        last = dr.select(self.t == k + 1, dr.minimum(self.s, s_max), 0)
+        return dr.maximum(self.s, 2), last
 
 
 # ------------------------------------------------------------------------ helpers
@@ -151,8 +196,7 @@ class BDPTIntegrator(LightTracingIntegrator):
         self.visualize_strategies = props.bool("visualizestrategies", False)
         self.visualize_weights = props.bool("visualizeweights", False)
         props.finish()
-        self._only = None          # (s, t): keep only that strategy (render_strategies)
-        self._unweighted = False   # without its MIS weight (visualizestrategies)
+        self._strategies = None    # Strategies of render_strategies (None: all, weighted)
 
     # -- rendering ---------------------------------------------------------------------
     def _plan(self, scene, sensor, spp):
@@ -171,48 +215,51 @@ class BDPTIntegrator(LightTracingIntegrator):
             weighted = not self.visualize_strategies
         out = {}
         try:
-            self._unweighted = not weighted
             for depth in range(self.maxdepth + 1):
                 for t in range(1, depth + 3):
                     s = depth + 2 - t
                     if (s, t) == (1, 1):
                         continue
-                    # Opaque: one kernel serves every strategy.
-                    self._only = (dr.opaque(mi.UInt32, s), dr.opaque(mi.UInt32, t))
+                    # Opaque: one kernel serves every strategy. Full-length subpaths:
+                    # every image then comes from the same paths as the BDPT image.
+                    self._strategies = Strategies(self.maxdepth, dr.opaque(mi.UInt32, s),
+                                                  dr.opaque(mi.UInt32, t), weighted, truncate=False)
                     out[(s, t)] = self.render(scene, sensor, seed, spp, progress=False)
         finally:
-            self._only, self._unweighted = None, False
+            self._strategies = None
         return out
-
-    def _keep(self, s, t, w):
-        """The factor a contribution of strategy (s, t) with MIS weight ``w`` gets."""
-        if self._unweighted:
-            w = mi.Float(1.0)
-        if self._only is None:
-            return w
-        return dr.select((s == self._only[0]) & (t == self._only[1]), w, 0.0)
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
         if self.max_depth == 0:
             return mi.Spectrum(0.0), mi.Bool(False)
-        n = dr.width(rng.state)
-        self._kinds = light_kinds(scene.lights) if len(scene.lights) else None
+        strategies = self._strategies or Strategies(self.maxdepth)
+        store, n_light = self.light_subpaths(scene, self.camera, rng, wl, strategies, self.splats.splat)
+        dr.eval(self.splats.buf)
+        return self.camera_subpaths(scene, self.camera, rng, ray, wl, active, store, n_light, strategies)
+
+    def light_subpaths(self, scene, camera, rng, wl, strategies, splat):
+        """Trace the light subpaths of ``dr.width(wl)`` samples (random numbers from
+        ``rng.next_float32()``), evaluating the strategies t = 1 among ``strategies``:
+        ``splat(pos, L, wl, active)`` receives their contributions at film positions.
+        Returns the stored vertices and their count per sample, evaluated with ``rng``."""
+        n = dr.width(wl.lambda_)
         store = dr.zeros(LightVertex, n * (self.maxdepth + 1))
         n_light = dr.zeros(mi.UInt32, n)
         if self.maxdepth >= 1 and len(scene.lights):
-            self._light_subpaths(scene, rng, wl, store, n_light)
-            dr.eval(store, n_light, rng, self.splats.buf)
-        return self._camera_subpaths(scene, rng, ray, wl, active, store, n_light)
+            self._light_subpaths(scene, camera, rng, wl, store, n_light, strategies, splat)
+            dr.eval(store, n_light, rng)
+        return store, n_light
 
     # -- light subpaths (and the t = 1 strategies) ------------------------------------
     @dr.syntax
-    def _light_subpaths(self, scene, rng, wl, store, n_light):
+    def _light_subpaths(self, scene, camera, rng, wl, store, n_light, strategies, splat):
         geo, bsdfs, lights = scene.geometry, scene.bsdfs, scene.lights
         n = dr.width(n_light)
         lane = dr.arange(mi.UInt32, n)
         md = self.maxdepth
         les, ray, beta = start_light_path(scene, self.emission_sampler, rng, wl, mi.Bool(True))
-        ok = les.pdf_dir > 0
+        # s = 1 takes a fresh light sample (next-event estimation): subpaths start at s = 2.
+        ok = (les.pdf_dir > 0) & (strategies.light_max >= 2)
         inf0 = les.infinite | les.delta_dir
         n0 = dr.select(inf0 | les.delta_pos, mi.Normal3f(0.0), les.n)
         fwd0 = dr.select(inf0, infinite_density(lights, self.emission_sampler, -les.d, ok), les.pmf * les.pdf_pos)
@@ -242,25 +289,25 @@ class BDPTIntegrator(LightTracingIntegrator):
             fwd = dr.select(prev_inf, pdf_pos0 * cos_k, to_area(pdf_dir, prev_p, si.p, si.n))
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
             ctx = ShadingContext(si, wl)
-            conn = hit & bsdfs.smooth(bsdf_id, hit)
+            conn = hit & bsdfs.smooth(bsdf_id, hit) & strategies.wants(k + 1, 1)
 
             # t = 1: connect y_k to the pinhole (strategy s = k + 1, depth k).
-            Lc, pos, vis = connect_to_camera(scene, self.camera, si, bsdf_id, wl, beta, conn)
-            cs = self.camera.sample_Wi(si.p)
+            Lc, pos, vis = connect_to_camera(scene, camera, si, bsdf_id, wl, beta, conn)
+            cs = camera.sample_Wi(si.p)
             wi_cam = si.to_local(cs.wi)
-            pdf_cam = self.camera.pdf_We(mi.Ray3f(cs.p, -cs.wi))[1]
+            pdf_cam = camera.pdf_We(mi.Ray3f(cs.p, -cs.wi))[1]
             rev_k = to_area(pdf_cam, cs.p, si.p, si.n)
             rev_km1 = to_area(reverse_pdf(bsdfs, bsdf_id, ctx, wi_cam, si.wi, vis), si.p, prev_p, prev_n, prev_inf)
             w = mis_weight(0.0, side_sum(rev_k, fwd, rev_km1, prev_fwd, prev_delta, prev_E))
-            Lc = Lc * self._keep(k + 1, 1, w)
+            Lc = Lc * strategies.weight(k + 1, 1, w)
             if bsdfs.dispersive:
                 Lc[term] = first_only(Lc)
-            self.splats.splat(pos, Lc, wl, vis)
+            splat(pos, Lc, wl, vis)
 
             # Continue: sample the adjoint BSDF, then y_{k-1}'s reverse density is known.
             u1 = rng.next_float32()
             u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
-            go = hit & (k < md)
+            go = hit & (k + 1 < strategies.light_max)
             bs = sample_importance(bsdfs, bsdf_id, ctx, u1, u2, go)
             wo = si.to_world(bs.wo)
             corr, side_ok = shading_correction(si, -ray.d, wo)
@@ -288,9 +335,12 @@ class BDPTIntegrator(LightTracingIntegrator):
 
     # -- camera subpaths (s = 0, s = 1 and s, t >= 2) ------------------------------------
     @dr.syntax
-    def _camera_subpaths(self, scene, rng, ray, wl, active, store, n_light):
+    def camera_subpaths(self, scene, cam, rng, ray, wl, active, store, n_light, strategies):
+        """Trace the camera subpaths from ``ray`` (random numbers from ``rng``) and evaluate
+        the strategies t >= 2 among ``strategies``, joining them to the stored light
+        vertices (:meth:`light_subpaths`): (radiance, valid mask)."""
         geo, bsdfs, lights = scene.geometry, scene.bsdfs, scene.lights
-        cam = self.camera
+        kinds = light_kinds(lights) if len(lights) else None
         n = dr.width(n_light)
         lane = dr.arange(mi.UInt32, n)
         md = self.maxdepth
@@ -309,7 +359,7 @@ class BDPTIntegrator(LightTracingIntegrator):
         term = mi.Bool(False)
         valid = mi.Bool(False)
         k = mi.UInt32(1)                  # z_k is found now; its strategies have t = k + 1
-        active = mi.Bool(active) & (pdf_dir > 0)
+        active = mi.Bool(active) & (pdf_dir > 0) & (strategies.camera_max >= 2)
         ray = mi.Ray3f(ray)
         while dr.hint(active, label="bdpt_camera"):
             si, shape = geo.intersect(ray, active)
@@ -321,15 +371,15 @@ class BDPTIntegrator(LightTracingIntegrator):
             # s = 0: the camera subpath found an emitter.
             if has_lights:
                 light = lights.light_of_hit(scene, shape, si, hit)
-                on_light = hit & (light > 0)
+                on_light = hit & (light > 0) & strategies.wants(0, k + 1)
                 Le = lights.L(light - 1, si, wl, on_light)
                 pdf_pos, pdf_e = lights.pdf_Le(light - 1, si.p, si.sh_frame.n, -ray.d, on_light)
                 rev_k = lights.pmf_Le(self.emission_sampler, light - 1, on_light) * pdf_pos
                 rev_km1 = to_area(pdf_e, si.p, prev_p, prev_n)
                 w = dr.select(k == 1, 1.0, mis_weight(side_sum(rev_k, fwd, rev_km1, prev_fwd, prev_delta, prev_E), 0.0))
-                Lk += dr.select(on_light, beta * Le * self._keep(0, k + 1, w), 0.0)
+                Lk += dr.select(on_light, beta * Le * strategies.weight(0, k + 1, w), 0.0)
                 if lights.has_infinite:
-                    escaped = active & ~si.is_valid()
+                    escaped = active & ~si.is_valid() & strategies.wants(0, k + 1)
                     Le_inf = mi.Spectrum(0.0)
                     for Le_i, _ in lights.Le_escaped(ray.d, wl, prev_p, prev_n, escaped):
                         Le_inf += Le_i
@@ -339,7 +389,7 @@ class BDPTIntegrator(LightTracingIntegrator):
                         dr.squared_norm(prev_n) > 0, dr.abs(dr.dot(prev_n, ray.d)), 1.0)
                     w = dr.select(k == 1, 1.0,
                                   mis_weight(side_sum(rev_k, pdf_dir, rev_km1, prev_fwd, prev_delta, prev_E), 0.0))
-                    Lk += dr.select(escaped, beta * Le_inf * self._keep(0, k + 1, w), 0.0)
+                    Lk += dr.select(escaped, beta * Le_inf * strategies.weight(0, k + 1, w), 0.0)
 
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
             ctx = ShadingContext(si, wl)
@@ -350,15 +400,15 @@ class BDPTIntegrator(LightTracingIntegrator):
             u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
             u1 = rng.next_float32()
             u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
-            go = hit & (k <= md)
-            nee = conn & (k <= md)
+            go = hit & (k + 1 < strategies.camera_max)
+            nee = conn & (k <= md) & strategies.wants(1, k + 1)
             wo_l = mi.Vector3f(0, 0, 1)
             if dr.hint(has_lights, mode="scalar"):   # a Python branch: both share variables
                 lt, pmf = self.light_sampler.sample(u_light, si.p, si.n, nee)
                 lt = mi.UInt32(lt)
                 ls = lights.sample_Li_light(lt, si, u_pos, wl, nee)
                 em = nee & (ls.pdf > 0) & (pmf > 0)
-                kind = dr.gather(mi.UInt32, self._kinds, lt, em)
+                kind = dr.gather(mi.UInt32, kinds, lt, em)
                 inf_l = (kind & (INFINITE_LIGHT | DELTA_DIRECTION)) != 0
                 delta_l = (kind & (DELTA_POSITION | DELTA_DIRECTION)) != 0
                 dist = dr.norm(ls.p - si.p)
@@ -377,7 +427,7 @@ class BDPTIntegrator(LightTracingIntegrator):
                 ng_l = dr.select(inf_l | ((kind & DELTA_POSITION) != 0), 0.0, ng_l)
                 wo_l = si.to_local(ls.wi)
             # One BSDF call gives the value toward the light and the continuation.
-            f_l, pdf_l, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_l, u1, u2, go)
+            f_l, pdf_l, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_l, u1, u2, go | nee)
             bs = dr.detach(bs)
             if dr.hint(has_lights, mode="scalar"):
                 pdf_pos, pdf_e = lights.pdf_Le(lt, ls.p, ns_l, -ls.wi, em)
@@ -389,15 +439,14 @@ class BDPTIntegrator(LightTracingIntegrator):
                 rev_km1 = to_area(reverse_pdf(bsdfs, bsdf_id, ctx, wo_l, si.wi, em), si.p, prev_p, prev_n)
                 sum_l = side_sum(rev_l, fwd_l, 0.0, 1.0, delta_l, 0.0)   # y_0 alone: s = 1
                 w = mis_weight(side_sum(rev_k, fwd, rev_km1, prev_fwd, prev_delta, prev_E), sum_l)
-                Lk += dr.select(em, beta * f_l * ls.L * (self._keep(1, k + 1, w) / (ls.pdf * pmf)), 0.0)
+                Lk += dr.select(em, beta * f_l * ls.L * (strategies.weight(1, k + 1, w) / (ls.pdf * pmf)), 0.0)
 
             if bsdfs.dispersive:
                 Lk[term] = first_only(Lk)
             L += Lk
 
             # s >= 2, t = k + 1: connect z_k to the stored light vertices y_{s-1}.
-            s = mi.UInt32(2)
-            s_max = dr.minimum(n_light, md + 1 - dr.minimum(k, md + 1))
+            s, s_max = strategies.connections(k, dr.minimum(n_light, md + 1 - dr.minimum(k, md + 1)))
             inner = conn & (s <= s_max)
             while dr.hint(inner, label="bdpt_connect"):
                 q = dr.gather(LightVertex, store, (s - 1) * n + lane, inner)
@@ -427,7 +476,7 @@ class BDPTIntegrator(LightTracingIntegrator):
                                  to_area(pdf_q_rev, q.p, qm.p, qm.n, qm_inf), qm.fwd,
                                  (qm.flags & DELTA) != 0, qm.E)
                 w = mis_weight(sum_c, sum_q)
-                Lc = q.beta * f_q * f_t * beta * (corr * self._keep(s, k + 1, w) / d2)
+                Lc = q.beta * f_q * f_t * beta * (corr * strategies.weight(s, k + 1, w) / d2)
                 if bsdfs.dispersive:
                     Lc[term | ((q.flags & TERMINATED) != 0)] = first_only(Lc)
                 L += dr.select(ok, Lc, 0.0)

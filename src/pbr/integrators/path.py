@@ -46,6 +46,7 @@ class PathIntegrator(SamplingIntegrator):
     name = "path"
     default_max_depth = -1
     differentiable = True
+    next_event = True   # light sampling at each vertex, MIS-weighted against BSDF sampling
 
     def __init__(self, props):
         super().__init__(props)
@@ -89,8 +90,10 @@ class PathIntegrator(SamplingIntegrator):
             if self.hide_emitters:
                 escaped &= depth > 0
             with dr.resume_grad(when=not primal):
-                Le = beta * emitted_mis(scene, self.light_sampler, light, si, ray.d, wl, on_light, escaped,
-                                        prev_p, prev_n, prev_pdf, prev_delta)
+                # Without next-event estimation only BSDF sampling finds emitters: weight 1
+                # (what emitted_mis gives after a delta vertex).
+                Le = beta * emitted_mis(scene, self.light_sampler, light, si, ray.d, wl, on_light, escaped, prev_p,
+                                        prev_n, prev_pdf, prev_delta if self.next_event else mi.Bool(True))
 
             active_next = hit & ~skip & (depth + 1 < max_depth)
             ctx = ShadingContext(si, wl)
@@ -99,7 +102,7 @@ class PathIntegrator(SamplingIntegrator):
             # Next-event estimation: one light sample, MIS-weighted against the BSDF.
             u_light = rng.next_float32()
             u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
-            smooth = active_next & bsdfs.smooth(bsdf_id, active_next)
+            smooth = active_next & bsdfs.smooth(bsdf_id, active_next) & self.next_event
             with dr.resume_grad(when=not primal):
                 # Attached: the sampled radiance ls.L depends on emitter parameters.
                 ls = lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl, smooth)
@@ -172,6 +175,39 @@ class PathIntegrator(SamplingIntegrator):
             active = skip | (cont & (~rr | survive) & (b_max > 0))
 
         return (L if primal else dL_fwd), valid
+
+
+@INTEGRATORS.register("prb_basic")
+class PRBBasicIntegrator(PathIntegrator):
+    """``prb_basic`` (Mitsuba's): Path Replay Backpropagation of the most basic path
+    tracer, BSDF sampling only: no next-event estimation, no MIS, no Russian roulette.
+    The same loop as ``path`` with those parts off, so its derivatives are ``prb``'s. Not
+    an alias of ``simplepath`` with ``samplelights=false``: that one counts pbrt-v4's
+    depth (one bounce fewer for the same number) and has no derivatives.
+
+    =============  ====  =======  ============================================================
+    name           type  default  meaning
+    =============  ====  =======  ============================================================
+    max_depth      int   6        longest path in segments (Mitsuba's: -1 unlimited, 1 emitters
+                                  seen directly, 2 direct light)
+    rr_depth       int   5        accepted and ignored, as Mitsuba's prb_basic does
+    hide_emitters  bool  false    camera rays pass through emitting surfaces and do not see
+                                  the environment
+    =============  ====  =======  ============================================================
+    """
+
+    name = "prb_basic"
+    default_max_depth = 6
+    next_event = False
+    light_sampler_type = "uniform"   # no light is sampled
+
+    def __init__(self, props):
+        SamplingIntegrator.__init__(self, props)
+        self.max_depth = props.int("max_depth", self.default_max_depth, min=-1)
+        props.int("rr_depth", 5, min=1)
+        self.rr_depth = 0xFFFFFFFF
+        self.hide_emitters = props.bool("hide_emitters", False)
+        props.finish()
 
 
 @INTEGRATORS.register("prb")
