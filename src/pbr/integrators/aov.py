@@ -10,7 +10,7 @@ import mitsuba as mi
 
 from ..bsdfs.base import ShadingContext
 from .. import spectrum as spec
-from .base import INTEGRATORS, SamplingIntegrator, PRIMAL, nested_integrators
+from .base import INTEGRATORS, PRIMAL, NestingIntegrator, nested_integrators
 
 # AOV type -> channel suffixes (Mitsuba's aov.cpp).
 AOV_TYPES = {
@@ -20,7 +20,7 @@ AOV_TYPES = {
 
 
 @INTEGRATORS.register("aov")
-class AOVIntegrator(SamplingIntegrator):
+class AOVIntegrator(NestingIntegrator):
     """``aov`` (Mitsuba's): arbitrary output variables of the surfaces camera rays see,
     after the R, G, B of the nested integrators (any number, each under its own key);
     :attr:`channels` names the channels.
@@ -60,11 +60,6 @@ class AOVIntegrator(SamplingIntegrator):
             raise props.error("aovs", "no AOV and no nested integrator given")
         self.channels = [f"{key}.{c}" for key, _ in self.nested for c in "RGB"]
         self.channels += [f"{name}.{c}" for name, kind in self.aovs for c in AOV_TYPES[kind]]
-
-    def prepare(self, scene, sensor: int = 0) -> None:
-        super().prepare(scene, sensor)
-        for _, integrator in self.nested:
-            integrator.prepare(scene, sensor)
 
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
         """(H, W, len(channels)) tensor: nested RGB, then AOVs (module docstring)."""

@@ -296,6 +296,19 @@ def depth_limit(max_depth: int) -> int:
     return max_depth if max_depth >= 0 else 0xFFFFFFFF
 
 
+class NestingIntegrator(SamplingIntegrator):
+    """Base of the integrators that render nested ones alongside (Mitsuba's ``aov`` and
+    ``moment``): ``self.nested``, (key, integrator) pairs (:func:`nested_integrators`),
+    prepared with this one."""
+
+    nested = ()
+
+    def prepare(self, scene, sensor: int = 0) -> None:
+        super().prepare(scene, sensor)
+        for _, integrator in self.nested:
+            integrator.prepare(scene, sensor)
+
+
 def nested_integrators(props, refuse=None) -> list:
     """(key, integrator) of the integrators nested in ``props`` (Mitsuba's ``aov`` and
     ``moment`` take any number, each under its own key), in order. ``refuse(type,

@@ -256,7 +256,6 @@ class BDPTIntegrator(LightTracingIntegrator):
         geo, bsdfs, lights = scene.geometry, scene.bsdfs, scene.lights
         n = dr.width(n_light)
         lane = dr.arange(mi.UInt32, n)
-        md = self.maxdepth
         les, ray, beta = start_light_path(scene, self.emission_sampler, rng, wl, mi.Bool(True))
         # s = 1 takes a fresh light sample (next-event estimation): subpaths start at s = 2.
         ok = (les.pdf_dir > 0) & (strategies.light_max >= 2)

@@ -11,7 +11,7 @@ import numpy as np
 
 from .. import spectrum as spec
 from .aov import AOVIntegrator
-from .base import INTEGRATORS, PRIMAL, SamplingIntegrator, nested_integrators
+from .base import INTEGRATORS, PRIMAL, SamplingIntegrator, NestingIntegrator, nested_integrators
 from .lightpath import LightTracingIntegrator
 from .ptracer import ParticleTracerIntegrator
 from .radiosity import RadiosityIntegrator
@@ -30,7 +30,7 @@ def _refuse(t, integrator):
 
 
 @INTEGRATORS.register("moment")
-class MomentIntegrator(SamplingIntegrator):
+class MomentIntegrator(NestingIntegrator):
     """``moment`` (Mitsuba's): per camera sample, each nested integrator's radiance as XYZ
     and its square, averaged by the film: channels R, G, B (the first nested integrator's
     image), then ``key.X/Y/Z`` of each nested integrator in order, then ``m2_key.X/Y/Z``
@@ -56,11 +56,6 @@ class MomentIntegrator(SamplingIntegrator):
             raise props.error(None, "expected at least one nested integrator")
         first = [f"{key}.{c}" for key, _ in self.nested for c in "XYZ"]
         self.aov_names = first + [f"m2_{n}" for n in first]
-
-    def prepare(self, scene, sensor: int = 0) -> None:
-        super().prepare(scene, sensor)
-        for _, integrator in self.nested:
-            integrator.prepare(scene, sensor)
 
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
         """(H, W, 3 + len(aov_names)) tensor (class docstring)."""
