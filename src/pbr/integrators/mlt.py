@@ -19,7 +19,7 @@ a fresh value). The two give the same distribution of proposals, and so the same
 coordinates a path does not read do not change its contribution. Eagerly, a proposal is
 one pass over the chains x D array with no per-coordinate bookkeeping (pbrt-v4 keeps an
 iteration count and a backup per coordinate, and the lanes of a kernel would read
-different coordinates); it costs D normal draws per chain and iteration (about 15% of
+different coordinates); it costs D normal draws per chain and iteration (about 20% of
 an iteration's time).
 """
 from __future__ import annotations
