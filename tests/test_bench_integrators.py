@@ -14,12 +14,19 @@ from pathlib import Path
 
 import pytest
 
-import pbr  # noqa: F401  (chooses libLLVM before Dr.Jit loads)
+import pbr  # first: it chooses libLLVM before Dr.Jit loads
 from pbr.plotting import pyplot
 
 ROOT = Path(__file__).resolve().parent.parent
 ARGS = ["--quick", "--res", "16", "--budgets", "4,64", "--ref-spp", "4096", "--max-time", "1.0", "--min-budgets", "1",
         "--scenes", "cornell,indirect"]
+
+
+def main(bench, *args):
+    """bench_integrators.main on the test backend (its --backend default is llvm)."""
+    return bench.main(ARGS + ["--backend", pbr.get_backend(), *args])
+
+
 # Not mlt: at 16 x 16 and 4 to 64 mutations per pixel (16 per chain at most) its error
 # is dominated by dark pixels that a few clumps of mutations reach (relMSE 0.26 -> 0.12
 # measured), which neither falls as 1/N yet nor separates a wrong reference (below);
@@ -43,7 +50,7 @@ def bench():
 @pytest.fixture(scope="module")
 def quick_run(bench, tmp_path_factory):
     d = tmp_path_factory.mktemp("bench")
-    rows, ratios = bench.main(ARGS + ["--out", str(d / "out"), "--cache", str(d / "cache")])
+    rows, ratios = main(bench, "--out", str(d / "out"), "--cache", str(d / "cache"))
     return d, rows, ratios
 
 
@@ -88,8 +95,8 @@ def test_wrong_reference_is_detected(bench, quick_run, tmp_path):
     a.rename(tmp)
     b.rename(a)
     tmp.rename(b)
-    rows, _ = bench.main(ARGS + ["--integrators", ",".join(UNBIASED_CHECKED), "--out", str(tmp_path / "out"),
-                                 "--cache", str(cache), "--no-plot"])
+    rows, _ = main(bench, "--integrators", ",".join(UNBIASED_CHECKED), "--out", str(tmp_path / "out"),
+                   "--cache", str(cache), "--no-plot")
     for sc in SCENES:
         for n in UNBIASED_CHECKED:
             assert not bench.errors_decrease(rows, sc, n, factor=0.4), (sc, n)
