@@ -6,11 +6,12 @@
 #   source .gpu/setup.sh; bash benchmarks/gpu_session.sh [tests] [bench]
 # Logs go to $OUT/logs (the device tool's $OUT, else out/gpu), packed into $OUT/gpu_logs.tar.gz;
 # a summary is printed at the end.
-#   tests: benchmarks/bench_cornell.py at 1024x1024 alone, then the quick suite on CUDA
-#          (pytest-xdist, one worker per 1-2 cores; a crashed worker is reported and
-#          replaced) beside benchmarks/triage_backend.py (default flags, and direct/whitted
-#          under every flag set);
-#   bench: bench_cornell, bench_scenes, bench_volpath and bench_optim at GPU sizes, alone.
+#   tests: the quick suite on CUDA (pytest-xdist, 12 workers; a crashed worker is reported
+#          and replaced; each failure's traceback goes to logs/failures.txt at once) beside
+#          benchmarks/triage_backend.py (default flags, and direct/whitted under every flag set);
+#   bench: bench_cornell, bench_scenes, bench_optim and bench_volpath at GPU sizes, alone.
+# Measured on an H100 (2026-11-27): the suite needs more than 330 s with 12 workers (the
+# forward==reverse tests over every parameter take longest); the benchmarks about 250 s.
 set -u
 # Phases run in the order given: tests, bench (default: tests bench). Environment:
 #   TEST_S      seconds for the test phase (default 330)
@@ -21,7 +22,7 @@ test_s=${TEST_S:-330}
 OUT=${OUT:-out/gpu}
 L=$OUT/logs
 mkdir -p "$L"
-export PBR_TEST_BACKEND=cuda PYTHONUNBUFFERED=1
+export PBR_TEST_BACKEND=cuda PYTHONUNBUFFERED=1 PBR_FAILURE_LOG=$L/failures.txt
 py=python3
 t0=$(date +%s)
 stamp() { echo "[$(( $(date +%s) - t0 )) s] $*"; }
@@ -73,3 +74,4 @@ if [ -f "$L/pytest.txt" ]; then
   echo "== pytest"
   grep -E "^(FAILED|ERROR) |crashed|[0-9]+ (passed|failed)" "$L/pytest.txt" | tail -n 60
 fi
+[ -f "$L/failures.txt" ] && { echo "== failures (first lines; all of them in failures.txt)"; head -c 6000 "$L/failures.txt"; }

@@ -26,6 +26,16 @@ def pytest_configure(config):
     config.pbr_backend = chosen
 
 
+def pytest_runtest_logreport(report):
+    """With ``PBR_FAILURE_LOG`` set, every failure's report is appended to that file as it
+    happens (by the process that ran the test): a run cut short by a time limit, as on a
+    lent GPU machine (benchmarks/gpu_session.sh), still leaves its tracebacks."""
+    path = os.environ.get("PBR_FAILURE_LOG")
+    if path and report.failed and not hasattr(report, "node"):   # 'node': xdist's copy in the controller
+        with open(path, "a") as f:
+            f.write(f"===== {report.nodeid} ({report.when})\n{report.longreprtext}\n")
+
+
 def pytest_report_header(config):
     return f"pbr backend: {config.pbr_backend} (Mitsuba variant {backend.variant()}; PBR_TEST_BACKEND)"
 

@@ -11,10 +11,17 @@ def test_rgb_coefficients_match_mitsuba_table():
     cols = np.concatenate([rng.random((200, 3)), [[0, 0, 0], [1, 1, 1], [0.3, 0.3, 0.3], [0, 0, 0.2], [1, 0, 0]]])
     c = np.array(S.rgb_to_coeffs(mi.Color3f(cols.T.astype(np.float32)))).T
     ref = np.array([np.array(mi.srgb_model_fetch(mi.ScalarColor3f(x))) for x in cols])
-    # Mitsuba clamps greys at +-8192, like pbr: compare the evaluated spectra instead of raw c2.
+    grey = (cols[:, 0] == cols[:, 1]) & (cols[:, 1] == cols[:, 2])
+    # The table lookup itself, compared in coefficient space: 8 float32 ulps of each colour's
+    # largest coefficient (bit-identical on LLVM; CUDA's compiler fuses the trilinear sums
+    # into FMAs). Its spectra are no fit measure of that: the polynomial cancels (terms of
+    # ~300 summing to ~1), so one ulp in one coefficient moves a value by up to 1.2e-5.
+    err = np.abs(c - ref)[~grey].max(1) / np.abs(ref[~grey]).max(1)
+    assert err.max() < 8 * 2.0 ** -24, err.max()
+    # Greys: pbr solves them exactly, Mitsuba clamps them at +-8192 like pbr: compare spectra.
     lam = mi.Spectrum(400, 500, 600, 700)
-    a = np.array(S.sigmoid_polynomial(mi.Array3f(c.T), lam))
-    b = np.array(S.sigmoid_polynomial(mi.Array3f(ref.T.astype(np.float32)), lam))
+    a = np.array(S.sigmoid_polynomial(mi.Array3f(c[grey].T), lam))
+    b = np.array(S.sigmoid_polynomial(mi.Array3f(ref[grey].T.astype(np.float32)), lam))
     assert np.abs(a - b).max() < 1e-5
 
 

@@ -116,7 +116,10 @@ def test_cornell_matches_mitsuba_load_file(tmp_path):
     ours = np.asarray(mi.render(our_scene, spp=4, seed=0))
     assert ref.shape == ours.shape == (24, 24, 3)
     assert ref.max() > 0.05  # the image is not black
-    assert np.allclose(ours, ref, atol=1e-6, rtol=0)
+    # Mitsuba's CUDA film splats the gaussian filter with float atomics, whose order varies
+    # between launches: the same scene then differs from itself (on LLVM it does not).
+    again = np.asarray(mi.render(ref_scene, spp=4, seed=0))
+    assert np.allclose(ours, ref, atol=1e-6 + 2 * np.abs(again - ref).max(), rtol=0)
     # Different seeds give different images, so the comparison above has teeth.
     other = np.asarray(mi.render(our_scene, spp=4, seed=1))
     assert not np.allclose(other, ref, atol=1e-6, rtol=0)
