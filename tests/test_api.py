@@ -27,9 +27,25 @@ def test_multipass_equals_single_pass(monkeypatch):
     from pbr.integrators import base
     scene = pbr.load_dict(pbr.cornell_box(8, 16))
     a = np.asarray(pbr.render(scene, seed=1))
-    monkeypatch.setattr(base, "MAX_SAMPLES_PER_PASS", 8 * 8 * 4)
+    monkeypatch.setenv("PBR_MAX_SAMPLES_PER_PASS", str(8 * 8 * 4))
+    assert base.SamplingIntegrator._plan(scene.integrator, scene, 0, 0)[-1] == 4   # 4 passes
     b = np.asarray(pbr.render(scene, seed=1, progress=False))
     assert np.allclose(a, b, rtol=1e-4, atol=1e-6)
+
+
+@pytest.mark.parametrize("value", ["abc", "0", "-5", "1e6"])
+def test_bad_samples_per_pass_is_a_clear_error(monkeypatch, value):
+    scene = pbr.load_dict(pbr.cornell_box(8, 4))
+    monkeypatch.setenv("PBR_MAX_SAMPLES_PER_PASS", value)
+    with pytest.raises(ValueError, match=f"PBR_MAX_SAMPLES_PER_PASS='{value}': expected a positive integer"):
+        pbr.render(scene)
+
+
+def test_samples_per_pass_follow_the_backend(monkeypatch):
+    from pbr.integrators import base
+    monkeypatch.delenv("PBR_MAX_SAMPLES_PER_PASS", raising=False)
+    assert base.max_samples_per_pass() == base.SAMPLES_PER_PASS[pbr.get_backend()]
+    assert base.SAMPLES_PER_PASS == {"llvm": 1 << 22, "cuda": 1 << 26}
 
 
 def test_traverse_keys_follow_mitsuba():

@@ -1,8 +1,8 @@
 """Sampling integrators: camera samples -> radiance -> developed image.
 
 One render *pass* is one megakernel over ``width * height * spp_pass`` camera samples laid
-out pixel-major, so a pixel's samples are summed with ``dr.block_sum`` (no atomics).
-Passes bound memory; their number follows from ``PBR_MAX_SAMPLES_PER_PASS``.
+out pixel-major, so a pixel's samples are summed by a local scatter-add inside the kernel.
+Passes bound memory; their number follows from :func:`max_samples_per_pass`.
 
 Differentiation follows Path Replay Backpropagation: ``sample`` is written once with a
 ``mode``; the primal pass accumulates radiance, the adjoint passes replay the same
@@ -17,6 +17,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .. import backend
 from .. import spectrum as spec
 from ..samplers import IndependentSampler, seed_array
 from ..sampling import power_heuristic
@@ -28,7 +29,27 @@ from ..spectrum import SampledWavelengths
 PRIMAL, FORWARD, BACKWARD = "primal", "forward", "backward"
 # Type name -> integrator class (each integrator registers itself in its module).
 INTEGRATORS = Registry("integrator")
-MAX_SAMPLES_PER_PASS = int(os.environ.get("PBR_MAX_SAMPLES_PER_PASS", 1 << 22))
+# Camera samples per pass, by backend. Each pass is traced anew in Python (tens of ms for
+# a scene with many BSDF families), which on a GPU can cost more than the kernel: on an
+# H100 the materials gallery at 1024 x 768 x 64 spp took 16 passes of 2^22 and 4.8x
+# Mitsuba's time. A symbolic-loop pass keeps its per-sample state in registers, so its
+# memory is the film's, and the GPU takes 2^26 samples a pass.
+SAMPLES_PER_PASS = {"llvm": 1 << 22, "cuda": 1 << 26}
+
+
+def max_samples_per_pass() -> int:
+    """Camera samples per render pass: ``PBR_MAX_SAMPLES_PER_PASS`` if set (a positive
+    integer, e.g. smaller on a GPU with little memory), else the backend's default."""
+    env = os.environ.get("PBR_MAX_SAMPLES_PER_PASS")
+    if env is None:
+        return SAMPLES_PER_PASS[backend.get_backend()]
+    try:
+        n = int(env)
+    except ValueError:
+        n = 0
+    if n <= 0:
+        raise ValueError(f"PBR_MAX_SAMPLES_PER_PASS={env!r}: expected a positive integer (samples per pass)")
+    return n
 
 
 class SamplingIntegrator:
@@ -87,7 +108,7 @@ class SamplingIntegrator:
         cam = scene.sensors[sensor]
         w, h = cam.film.size
         spp = int(spp) if spp else cam.sampler.sample_count
-        per_pass = max(1, min(spp, MAX_SAMPLES_PER_PASS // (w * h)))
+        per_pass = max(1, min(spp, max_samples_per_pass() // (w * h)))
         while spp % per_pass:
             per_pass -= 1
         return cam, w, h, spp, per_pass, spp // per_pass
