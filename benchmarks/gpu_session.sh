@@ -9,11 +9,13 @@
 #   tests: the quick suite on CUDA (pytest-xdist, 12 workers; a crashed worker is reported
 #          and replaced; each failure's traceback goes to logs/failures.txt at once) beside
 #          benchmarks/triage_backend.py (default flags, and direct/whitted under every flag set);
-#   bench: bench_cornell, bench_scenes, bench_optim and bench_volpath at GPU sizes, alone.
+#   bench: bench_cornell, bench_scenes, bench_optim and bench_volpath at GPU sizes, alone;
+#   profile: benchmarks/profile_kernels.py on the scenes where pbr lost most (kernels,
+#          registers and spills by ptxas, Dr.Jit flag changes).
 # Measured on an H100 (2026-11-27): the suite needs more than 330 s with 12 workers (the
 # forward==reverse tests over every parameter take longest); the benchmarks about 250 s.
 set -u
-# Phases run in the order given: tests, bench (default: tests bench). Environment:
+# Phases run in the order given: tests, bench, profile (default: tests bench). Environment:
 #   TEST_S      seconds for the test phase (default 330)
 #   PYTEST_ARGS what pytest runs (default: tests, and then the triage runs beside it)
 #   BENCHES     which benchmarks (default: cornell scenes optim volpath)
@@ -61,6 +63,9 @@ for phase in $phases; do
       volpath) bench bench_volpath 80 benchmarks/bench_volpath.py --res 512 --spp 64 --ref-spp 1024 --reps 3 ;;
       esac
     done ;;
+  profile)
+    bench profile_kernels 150 benchmarks/profile_kernels.py --res 1024 --spp 64 --reps 3 \
+      --scenes gallery,gallery-diffuse,cornell-glossy --ir-dir "$L/ir" ;;
   esac
 done
 stamp "done"
