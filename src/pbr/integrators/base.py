@@ -17,7 +17,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .. import backend
+from .. import backend, memory
 from .. import spectrum as spec
 from ..samplers import IndependentSampler, seed_array
 from ..sampling import power_heuristic
@@ -111,6 +111,7 @@ class SamplingIntegrator:
         per_pass = max(1, min(spp, max_samples_per_pass() // (w * h)))
         while spp % per_pass:
             per_pass -= 1
+        memory.check_render(w, h, per_pass, 4, f"sensor {sensor}")
         return cam, w, h, spp, per_pass, spp // per_pass
 
     def _camera_samples(self, cam, w, h, spp, per_pass, pass_index, seed):
