@@ -27,6 +27,7 @@ import resource
 from . import backend
 
 MAX_ENTRIES = (1 << 32) - 1
+SMALL = 1 << 28          # films below 256 MiB are not checked against the memory available
 _GiB = float(1 << 30)
 
 
@@ -105,7 +106,10 @@ def check_render(width: int, height: int, spp_per_pass: int, channels: int, wher
         raise ValueError(
             f"{where}: a {width} x {height} film needs {entries:,} film entries and {lanes:,} samples per "
             f"pass, over Dr.Jit's limit of 2^32 - 1 per array: render a smaller image (or crop it)")
-    need, avail = film_bytes(width, height, channels), available_bytes()
+    need = film_bytes(width, height, channels)
+    if need < SMALL:
+        return
+    avail = available_bytes()
     if avail is not None and need > avail:
         raise MemoryError(
             f"{where}: a {width} x {height} film with {channels} channels needs {need / _GiB:.1f} GiB, "
