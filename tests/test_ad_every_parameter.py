@@ -39,7 +39,7 @@ def test_forward_equals_reverse_for_every_gallery_parameter(gallery):
     scene, params = gallery
     rng = np.random.default_rng(0)
     w = rng.uniform(0.0, 1.0, (12, 16, 3))
-    keys = list(params.keys())
+    keys = [k for k in params.keys() if params.flags(k) == 0]   # geometry, sensor: not differentiable
     assert len(keys) >= 40
     bad = []
     for k in keys:

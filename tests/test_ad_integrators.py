@@ -55,12 +55,12 @@ CASES = {
     "envmap": (lambda: _box({"type": "roughconductor", "alpha": 0.2, "material": "Al"}, lighting="envmap"),
                "sky.data", _texel_tangent, 0.05, 8192, 2048),
     "sigma_t": (lambda: _fog({"type": "homogeneous", "sigma_t": 2.0, "albedo": 0.8}),
-                "ball.interior.sigma_t.value", lambda p, k: mi.Float(1.0), 0.05, 8192, 2048),
+                "ball.interior_medium.sigma_t.value.value", lambda p, k: mi.Float(1.0), 0.05, 8192, 2048),
     "medium_albedo": (lambda: _fog({"type": "homogeneous", "sigma_t": 2.0, "albedo": 0.6}),
-                      "ball.interior.albedo.value", lambda p, k: mi.Float(1.0), 0.02, 8192, 2048),
+                      "ball.interior_medium.albedo.value.value", lambda p, k: mi.Float(1.0), 0.02, 8192, 2048),
     # Eight voxels of a backlit cloud (grad_scenes; loose majorant): in the Cornell box's
     # cloud the per-run standard deviation at 2048 spp was ~25% of the value.
-    "grid_voxel": (backlit_cloud, "cloud.interior.sigma_t.data", _voxel_tangent, 0.5, 8192, 8192),
+    "grid_voxel": (backlit_cloud, "cloud.interior_medium.sigma_t.data", _voxel_tangent, 0.5, 8192, 8192),
 }
 
 

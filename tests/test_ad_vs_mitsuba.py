@@ -148,11 +148,11 @@ CASES = {
                 "light.emitter.radiance.value", _const(*T_RGB), _emitter_mi(LIGHT, T_RGB), 32, 8, None),
     "envmap": (lambda: _small(lit_box({"type": "roughconductor", "alpha": 0.2, "material": "Al"}, lighting="envmap")),
                "sky.data", "sky.data", _envmap_block_pbr, _envmap_block_mi, 128, 8, None),
-    "sigma_t": (lambda: backlit_medium(HOMOGENEOUS), "cloud.interior.sigma_t.value",
+    "sigma_t": (lambda: backlit_medium(HOMOGENEOUS), "cloud.interior_medium.sigma_t.value.value",
                 "cloud.interior_medium.sigma_t.value.value", _const(1.0), _const(1.0), 128, 8, None),
-    "medium_albedo": (lambda: backlit_medium(HOMOGENEOUS), "cloud.interior.albedo.value",
+    "medium_albedo": (lambda: backlit_medium(HOMOGENEOUS), "cloud.interior_medium.albedo.value.value",
                       "cloud.interior_medium.albedo.value.value", _const(1.0), _const(1.0), 128, 8, None),
-    "grid_voxel": (lambda: backlit_cloud(), "cloud.interior.sigma_t.data", "cloud.interior_medium.sigma_t.data",
+    "grid_voxel": (lambda: backlit_cloud(), "cloud.interior_medium.sigma_t.data", "cloud.interior_medium.sigma_t.data",
                    _voxels, _voxels, 512, 12, None),
 }
 

@@ -42,7 +42,7 @@ def test_voxel_gradient_finite_when_a_scattering_point_is_on_the_face():
     tests/test_ad_vs_mitsuba.py's slow variant)."""
     scene = pbr.load_dict(backlit_cloud())
     params = pbr.traverse(scene)
-    key = "cloud.interior.sigma_t.data"
+    key = "cloud.interior_medium.sigma_t.data"
     v = mi.TensorXf(params[key])
     dr.enable_grad(v)
     params[key] = v

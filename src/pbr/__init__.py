@@ -9,7 +9,7 @@ Public API (see README.md)::
     pbr.write_image("out.exr", img)
     params = pbr.traverse(scene)
 """
-from .backend import set_backend, get_backend, BackendError  # noqa: F401  (configures libLLVM first)
+from .backend import set_backend, get_backend, BackendError, VariantWarning  # noqa: F401  (configures libLLVM first)
 from .scene import load_dict, load_file, traverse, SceneError, SceneParameters  # noqa: F401
 from .scenes import cornell_box, materials_gallery  # noqa: F401
 from .render import render  # noqa: F401

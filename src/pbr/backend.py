@@ -1,77 +1,45 @@
-"""Backend selection (LLVM on the CPU, CUDA on the GPU) and locating a usable libLLVM.
+"""Backend selection (LLVM on the CPU, CUDA on the GPU), a usable libLLVM, and the
+Mitsuba variant pbr runs on.
 
-Dr.Jit's LLVM backend loads ``libLLVM`` at run time. Dr.Jit 1.5 needs LLVM >= 16:
-Debian 12's libLLVM-15 crashes Mitsuba's kernels and libLLVM-14 is rejected. pbr
-therefore points ``DRJIT_LIBLLVM_PATH`` at a usable library *before* Dr.Jit
-initialises its LLVM backend, trying in order:
-
-1. ``DRJIT_LIBLLVM_PATH`` if the user already set it;
-2. the ``karellen-llvm-core`` wheel (a pbr dependency) in this Python environment;
-3. a system libLLVM of version >= 16.
+Dr.Jit's LLVM backend loads ``libLLVM`` when it starts (``import mitsuba`` starts it).
+Dr.Jit 1.5 needs LLVM >= 16: Debian 12's libLLVM-15 crashes Mitsuba's kernels and
+libLLVM-14 is rejected. :mod:`_pbr_libllvm` points ``DRJIT_LIBLLVM_PATH`` at a usable
+library: pbr's installation runs it at interpreter start-up (``pbr-libllvm.pth``), so
+importing ``mitsuba`` or ``drjit`` before ``pbr`` works; importing pbr runs it again for
+interpreters started without site-packages (``python -S``, ``PYTHONPATH`` checkouts).
 
 All of pbr's array code uses Mitsuba's variant types (``mi.Float``, ``mi.Spectrum``,
 ...), so the same code runs on both backends: :func:`set_backend` selects the
 ``{llvm,cuda}_ad_spectral`` variant that provides them (and the geometry).
+
+**The user's variant.** :func:`set_backend` makes pbr's variant Mitsuba's active one (it
+is a request for it). Every other pbr call (loading, rendering, traversal, updates)
+switches to pbr's variant while it runs and back to the variant it found afterwards
+(:func:`pbr_variant`), so a script that uses Mitsuba beside pbr (say ``llvm_ad_rgb``
+references) keeps its variant. pbr's backend follows the user's variant when one is set
+before pbr's first call (``llvm_*`` -> LLVM, ``cuda_*`` -> CUDA).
 """
 
 from __future__ import annotations
 
-import glob
+import contextlib
+import functools
 import os
-import re
-import sys
+import warnings
 
-MIN_LLVM = 16
+from _pbr_libllvm import MIN_LLVM, configure as _configure_llvm_path, find_libllvm  # noqa: F401
+from _pbr_libllvm import llvm_version as _llvm_version
+
+# Must run before Dr.Jit initialises its LLVM backend (a no-op when pbr-libllvm.pth did it).
+_configure_llvm_path()
+
+import drjit as dr  # noqa: E402
+import mitsuba as mi  # noqa: E402
 
 
 class BackendError(RuntimeError):
     """No usable Dr.Jit backend (or the requested one is unavailable)."""
 
-
-def _llvm_version(path: str) -> int | None:
-    m = re.search(r"libLLVM[-.]?(?:so\.)?(\d+)", os.path.basename(path))
-    if m:
-        return int(m.group(1))
-    m = re.search(r"llvm-(\d+)", path)
-    return int(m.group(1)) if m else None
-
-
-def find_libllvm() -> str | None:
-    """Return the path of a usable libLLVM (>= 16), or None."""
-    env = os.environ.get("DRJIT_LIBLLVM_PATH")
-    if env and os.path.exists(env):
-        return env
-    # The karellen-llvm-core wheel installs into <prefix>/lib.
-    prefixes = {sys.prefix, sys.base_prefix, os.path.dirname(os.path.dirname(sys.executable))}
-    candidates = []
-    for p in prefixes:
-        candidates += sorted(glob.glob(os.path.join(p, "lib", "libLLVM.so.*")))
-        candidates += sorted(glob.glob(os.path.join(p, "lib", "libLLVM-*.so")))
-    for c in candidates:
-        v = _llvm_version(c)
-        if v is None or v >= MIN_LLVM:
-            return c
-    system = glob.glob("/usr/lib/llvm-*/lib/libLLVM*.so*") + glob.glob(
-        "/usr/lib/*-linux-gnu/libLLVM-*.so*") + glob.glob("/usr/local/lib/libLLVM*.so*")
-    usable = [(v, c) for c in system if (v := _llvm_version(c)) is not None and v >= MIN_LLVM]
-    if usable:
-        return max(usable)[1]
-    return None
-
-
-def _configure_llvm_path() -> None:
-    if "DRJIT_LIBLLVM_PATH" in os.environ and os.path.exists(os.environ["DRJIT_LIBLLVM_PATH"]):
-        return
-    path = find_libllvm()
-    if path is not None:
-        os.environ["DRJIT_LIBLLVM_PATH"] = path
-
-
-# Must run before Dr.Jit initialises its LLVM backend (i.e. before any LLVM array exists).
-_configure_llvm_path()
-
-import drjit as dr  # noqa: E402
-import mitsuba as mi  # noqa: E402
 
 _backend: str | None = None
 
@@ -103,8 +71,10 @@ def loaded_libllvm() -> str | None:
 
 
 def _check_loaded_llvm() -> None:
-    """Refuse an LLVM that Dr.Jit loaded before pbr could choose one (importing drjit or
-    mitsuba before pbr): Debian 12's libLLVM-15 aborts the process on Mitsuba's kernels."""
+    """Refuse an LLVM that Dr.Jit loaded before pbr could choose one: without pbr's
+    start-up hook (``pbr-libllvm.pth``: missing from this environment, or ``python -S``),
+    importing drjit or mitsuba before pbr lets Dr.Jit pick Debian 12's libLLVM-15, which
+    aborts the process on Mitsuba's kernels."""
     path = loaded_libllvm()
     if path is None:
         return
@@ -112,8 +82,10 @@ def _check_loaded_llvm() -> None:
     if v is not None and v < MIN_LLVM:
         raise BackendError(
             f"Dr.Jit has already loaded {path} (LLVM {v}), which cannot run pbr's kernels. This happens "
-            "when drjit or mitsuba is imported before pbr: import pbr first, or set DRJIT_LIBLLVM_PATH "
-            "to a libLLVM >= 16 before starting Python. " + _LLVM_HELP)
+            "when drjit or mitsuba is imported before pbr in an environment where pbr's start-up hook "
+            "(pbr-libllvm.pth, installed with pbr) did not run: reinstall pbr (`pip install -e .` or "
+            "`make test`), import pbr first, or set DRJIT_LIBLLVM_PATH to a libLLVM >= 16 before "
+            "starting Python. " + _LLVM_HELP)
 
 
 def available_backends() -> list[str]:
@@ -121,8 +93,9 @@ def available_backends() -> list[str]:
     return [b for b in ("cuda", "llvm") if _has(b)]
 
 
-def set_backend(name: str = "auto") -> str:
-    """Select "llvm", "cuda" or "auto" (CUDA if usable, else LLVM). Returns the choice."""
+def _select(name: str) -> str:
+    """Check that backend ``name`` ("llvm", "cuda" or "auto") is usable and make it
+    pbr's backend; Mitsuba's active variant is left alone. Returns the choice."""
     global _backend
     if name not in ("llvm", "cuda", "auto"):
         raise BackendError(f"set_backend: unknown backend {name!r}; expected 'llvm', 'cuda' or 'auto'")
@@ -136,15 +109,35 @@ def set_backend(name: str = "auto") -> str:
             raise BackendError(f"The LLVM backend is unavailable (DRJIT_LIBLLVM_PATH={path!r}). " + _LLVM_HELP)
         raise BackendError("The CUDA backend is unavailable: no CUDA-capable GPU/driver was found. "
                            "Use pbr.set_backend('llvm') for the CPU.")
-    mi.set_variant(f"{name}_ad_spectral")
     _backend = name
     return name
 
 
+def set_backend(name: str = "auto") -> str:
+    """Select "llvm", "cuda" or "auto" (CUDA if usable, else LLVM), and make its
+    ``{name}_ad_spectral`` variant Mitsuba's active one (pbr's arrays are its types; a
+    Mitsuba reference render to compare with wants it too). Returns the choice."""
+    name = _select(name)
+    if mi.variant() != f"{name}_ad_spectral":
+        mi.set_variant(f"{name}_ad_spectral")
+    return name
+
+
+def _default_backend() -> str:
+    """``PBR_BACKEND``; else the backend of the variant the user made active (``llvm_*``,
+    ``cuda_*``), so that pbr's arrays live where the user's do; else "auto"."""
+    if os.environ.get("PBR_BACKEND"):
+        return os.environ["PBR_BACKEND"]
+    user = mi.variant() or ""
+    prefix = user.split("_", 1)[0]
+    return prefix if prefix in ("llvm", "cuda") else "auto"
+
+
 def get_backend() -> str:
-    """The active backend, selecting the default ("auto") on first use."""
+    """The active backend, selecting the default on first use (see :func:`_default_backend`);
+    Mitsuba's variant is not changed here."""
     if _backend is None:
-        set_backend(os.environ.get("PBR_BACKEND", "auto"))
+        _select(_default_backend())
     return _backend
 
 
@@ -153,12 +146,65 @@ def variant() -> str:
 
 
 def ensure() -> None:
-    """Make sure a backend is active (Mitsuba variant set); call before building arrays."""
-    if _backend is None or mi.variant() != variant():
-        if _backend is None:
-            get_backend()
-        else:
-            mi.set_variant(variant())
+    """Make pbr's variant Mitsuba's active one (selecting the default backend on first
+    use); call before building arrays. Public entry points use :func:`pbr_variant`,
+    which also switches back."""
+    v = variant()
+    if mi.variant() != v:
+        mi.set_variant(v)
+
+
+def ensure_any() -> None:
+    """Make sure some Mitsuba variant is active (pbr's when none is): Mitsuba's scalar
+    types (``mi.ScalarTransform4f``...) need one, and are the same in every variant."""
+    if mi.variant() is None:
+        ensure()
+
+
+class VariantWarning(RuntimeWarning):
+    """pbr switched Mitsuba's variant (and back) around a call; see :func:`pbr_variant`."""
+
+
+_depth = 0            # nesting of pbr_variant blocks
+_warned = False
+
+
+@contextlib.contextmanager
+def pbr_variant():
+    """Within the block Mitsuba's active variant is pbr's; at the end of the outermost
+    block the variant that was active before is restored (when there was one).
+
+    Mitsuba's ``set_variant`` costs about 0.2 s (it reloads Mitsuba's Python integrators;
+    measured with Mitsuba 3.9.1), so a call made while another variant is active costs
+    about 0.4 s more; pbr says so once per process (:class:`VariantWarning`)."""
+    global _depth, _warned
+    outer = _depth == 0
+    before = mi.variant() if outer else None
+    _depth += 1
+    try:
+        if outer and before != variant():
+            ensure()
+            if before is not None and not _warned:
+                _warned = True
+                warnings.warn(
+                    f"pbr runs on Mitsuba's {variant()!r} variant (its arrays are that variant's types); "
+                    f"the active variant is {before!r}, so each pbr call switches to {variant()!r} and back "
+                    "(about 0.4 s per call, Mitsuba reloads its Python integrators on every switch). "
+                    "Call pbr.set_backend() to keep pbr's variant active.", VariantWarning, stacklevel=4)
+        yield
+    finally:
+        _depth -= 1
+        if outer and before is not None and mi.variant() != before:
+            mi.set_variant(before)
+
+
+def uses_pbr_variant(fn):
+    """Decorator: ``fn`` runs inside :func:`pbr_variant`."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with pbr_variant():
+            return fn(*args, **kwargs)
+    return wrapper
 
 
 class VariantStruct(type):

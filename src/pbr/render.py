@@ -1,57 +1,101 @@
 """``pbr.render``: the image of a scene, differentiable with respect to its parameters.
 
-Same signature as ``mitsuba.render``. Without gradients it runs the integrator's primal
-passes. When any scene parameter has gradients enabled, the image is produced by a
+Same signature as ``mitsuba.render``: ``integrator`` may be an integrator dict or
+``pbr.load_dict`` of one; ``sensor`` an index, an entry of ``scene.sensors()`` or a
+sensor loaded on its own (``pbr.load_dict`` of a sensor dict). Without gradients it runs
+the integrator's primal passes. When any scene parameter has gradients enabled, the image is produced by a
 ``dr.CustomOp`` whose backward (forward) derivative runs the integrator's PRB adjoint
 passes with seed ``seed_grad`` and ``spp_grad`` samples, decorrelated from the primal.
 """
 
 from __future__ import annotations
 
+import contextlib
+
 import drjit as dr
 
 from . import backend, dispatch
 from .samplers import seed_array
-from .scene.params import tables_as_leaves, traverse
+from .scene.objects import as_integrator
+from .scene.params import SceneParameters, tables_as_leaves, traverse
+from .scene.views import SensorView
+
+
+@contextlib.contextmanager
+def sensor_index(scene, sensor):
+    """The index in ``scene.sensors`` of ``sensor`` (an index, a ``scene.sensors()``
+    entry, or a sensor loaded on its own, which is appended for the block)."""
+    if isinstance(sensor, SensorView):
+        sensor = sensor.camera
+    if isinstance(sensor, int) and not isinstance(sensor, bool):
+        if not 0 <= sensor < len(scene.sensors):
+            raise ValueError(f"render: sensor index {sensor!r} out of range (scene has {len(scene.sensors)})")
+        yield sensor
+        return
+    if type(sensor).__module__.startswith("mitsuba"):
+        raise TypeError("render: sensor is a Mitsuba object; pass pbr.load_dict(<the sensor's dict>), an entry "
+                        "of scene.sensors() or an index")
+    if not hasattr(sensor, "sample_ray"):
+        raise TypeError(f"render: sensor: expected an index, a scene.sensors() entry or a pbr sensor, "
+                        f"got {type(sensor).__name__}")
+    for i, s in enumerate(scene.sensors):
+        if s is sensor:
+            yield i
+            return
+    scene.sensors.append(sensor)
+    try:
+        yield len(scene.sensors) - 1
+    finally:
+        scene.sensors.remove(sensor)
 
 
 class _RenderOp(dr.CustomOp):
     def eval(self, scene, params, sensor, integrator, seed, spp):
         self.scene, self.sensor, self.integrator = scene, sensor, integrator
         self.seed, self.spp = seed, spp
-        with dr.suspend_grad():
-            return integrator.render(scene, sensor=sensor, seed=seed[0], spp=spp[0])
+        with dr.suspend_grad(), sensor_index(scene, sensor) as i:
+            return integrator.render(scene, sensor=i, seed=seed[0], spp=spp[0])
 
     def forward(self):
         # The rendering loop's forward derivative starts from the tables' tangents, and
         # crosses family dispatch as per-lane selects (see pbr.dispatch).
-        with tables_as_leaves(self.scene, self.grad_in("params")), dispatch.by_lane():
-            img = self.integrator.render_forward(self.scene, sensor=self.sensor, seed=self.seed[1],
-                                                 spp=self.spp[1])
+        with backend.pbr_variant(), sensor_index(self.scene, self.sensor) as i, \
+                tables_as_leaves(self.scene, self.grad_in("params")), dispatch.by_lane():
+            img = self.integrator.render_forward(self.scene, sensor=i, seed=self.seed[1], spp=self.spp[1])
         self.set_grad_out(img)
 
     def backward(self):
-        self.integrator.render_backward(self.scene, self.grad_out(), sensor=self.sensor,
-                                        seed=self.seed[1], spp=self.spp[1])
+        with backend.pbr_variant(), sensor_index(self.scene, self.sensor) as i:
+            self.integrator.render_backward(self.scene, self.grad_out(), sensor=i, seed=self.seed[1],
+                                            spp=self.spp[1])
 
     def name(self):
         return "pbr.render"
 
 
+@backend.uses_pbr_variant
 def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, spp=0, spp_grad=0,
            progress=None):
     """Render ``scene`` from sensor ``sensor``; returns ``mi.TensorXf`` (H, W, 3), linear
-    sRGB (``np.asarray`` gives float32). ``spp=0`` uses the scene's sampler count. Seeds
-    are Python ints or width-1 ``mi.UInt32`` (pass the latter, e.g. ``dr.opaque(mi.UInt32,
-    i)``, to a function under ``dr.freeze``: an int is baked into its recording)."""
-    backend.ensure()
-    integrator = integrator or scene.integrator
-    if not isinstance(sensor, int) or not 0 <= sensor < len(scene.sensors):
-        raise ValueError(f"render: sensor index {sensor!r} out of range (scene has {len(scene.sensors)})")
+    sRGB (``np.asarray`` gives float32). ``spp=0`` uses the sensor's sampler count.
+    ``integrator``: None (the scene's), an integrator dict, or ``pbr.load_dict`` of one.
+    ``sensor``: an index, an entry of ``scene.sensors()``, or ``pbr.load_dict`` of a
+    sensor dict. Seeds are Python ints or width-1 ``mi.UInt32`` (pass the latter, e.g.
+    ``dr.opaque(mi.UInt32, i)``, to a function under ``dr.freeze``: an int is baked into
+    its recording)."""
+    integrator = scene.integrator if integrator is None else as_integrator(integrator)
     if spp < 0 or spp_grad < 0:
         raise ValueError("render: spp must be >= 0")
+    if any(s.parameters_grad_enabled() for s in scene.mi_scene.shapes()):
+        raise NotImplementedError("render: a shape's geometry has gradients enabled, but pbr does not "
+                                  "differentiate geometry (no edge sampling or reparameterisation): disable "
+                                  "them (dr.disable_grad)")
     if not scene.requires_grad():
-        return integrator.render(scene, sensor=sensor, seed=seed, spp=spp, progress=progress)
+        with sensor_index(scene, sensor) as i:
+            return integrator.render(scene, sensor=i, seed=seed, spp=spp, progress=progress)
+    p = params if params is not None else traverse(scene)
+    values = (p.differentiable_values() if isinstance(p, SceneParameters)
+              else {k: v for k, v in p.items() if dr.grad_enabled(v)})
     if scene.bsdfs.dispersive:
         raise NotImplementedError("render: gradients of scenes with dispersive dielectrics (a "
                                   "wavelength-dependent IOR) are not supported yet")
@@ -62,6 +106,4 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
             seed = seed_array(seed)
             seed_grad = dr.select(seed == 0, 0x51ED270B, seed + 0x9E3779B9)
     spp_grad = spp_grad or spp
-    p = params if params is not None else traverse(scene)
-    values = {k: v for k, v in p.items() if dr.grad_enabled(v)}
     return dr.custom(_RenderOp, scene, values, sensor, integrator, (seed, seed_grad), (spp, spp_grad))

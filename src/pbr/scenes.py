@@ -14,7 +14,7 @@ from .bsdfs import bsdf_names
 def cornell_box(resolution: int = 256, spp: int = 64) -> dict:
     """The Cornell box of ``mi.cornell_box()`` (same geometry, materials, light and
     camera), as a Mitsuba-style scene dict."""
-    backend.ensure()  # the dict holds Mitsuba transforms, which need a variant
+    backend.ensure_any()  # the dict holds Mitsuba transforms, which need a variant
     T = mi.ScalarTransform4f
 
     def rect(tf, bsdf):
@@ -58,7 +58,7 @@ def glass_caustic(resolution: int = 64, spp: int = 64, light_size: float = 0.4, 
     floor under the sphere only through the glass (a caustic; it needs max_depth >= 4:
     camera - floor - glass - glass - light), and the camera also sees the caustic through
     the sphere. A Mitsuba-style scene dict with a box filter."""
-    backend.ensure()
+    backend.ensure_any()
     T = mi.ScalarTransform4f
     return {
         "type": "scene",
@@ -84,7 +84,7 @@ def door_crack(resolution: int = 64, spp: int = 64, crack: float = 0.05, light_u
     Light reaches the camera's side only through the slit, mostly after bounces in the
     lit part: paths from the camera must find the slit and then the light. A
     Mitsuba-style scene dict with a box filter."""
-    backend.ensure()
+    backend.ensure_any()
     T = mi.ScalarTransform4f
     white = {"type": "ref", "id": "white"}
 
@@ -160,7 +160,7 @@ def materials_gallery(resolution: int = 480, spp: int = 64, materials=None) -> d
     """A grid of spheres, one per BSDF family (``GALLERY_MATERIALS``; ``hair`` on a tuft of
     fibres instead), on a diffuse floor under an area light: a Mitsuba-style scene dict."""
     mats = [m for m in (materials or GALLERY_MATERIALS) if m[1]["type"] in bsdf_names()]
-    backend.ensure()
+    backend.ensure_any()
     T = mi.ScalarTransform4f
     cols = 5
     rows = (len(mats) + cols - 1) // cols

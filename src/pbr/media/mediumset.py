@@ -97,16 +97,43 @@ class MediumSet:
         m = _Medium(props.path)
         if props.type not in MEDIUM_TYPES:
             raise props.error(None, f"unknown medium type {props.type!r} (supported: {MEDIUM_TYPES.supported()})")
+        first_slot = len(loader.textures.items)
         getattr(self, MEDIUM_TYPES[props.type])(loader, props, m)
         self._emission(loader, props, m)
         m.owner = ParamOwner(props.path, scale=mi.Float(m.scale))
         m.phase = self._phase(props)
+        if m.phase[0] == HG and (props.has("g") or any(c["type"] == "hg" for _, c in props.children())):
+            m.owner.params["phase_function.g"] = mi.Float(m.phase[1])
+        self._traverse_keys(loader.textures, first_slot, m)
         if props.has("sample_emitters") and not props.bool("sample_emitters"):
             raise props.error("sample_emitters", "only sample_emitters=true is supported")
         props.mark("has_spectral_extinction")
         props.finish()
         self.media.append(m)
         return len(self.media) - 1
+
+    @staticmethod
+    def _traverse_keys(textures, first_slot: int, m) -> None:
+        """Name medium ``m``'s constant coefficients as ``mi.traverse`` does: in Mitsuba's
+        form a constant coefficient is a constant volume holding a spectrum
+        (``<medium>.sigma_t.value.value``; grids are ``<medium>.sigma_t.data``). The
+        medium's own prefix (``<shape>.interior_medium``...) is the scene's business
+        (:func:`pbr.scene.params.mitsuba_key_paths`). The constant factor (1) by which pbr
+        multiplies a grid is internal (``traversed = False``)."""
+        if m.form != TA:
+            return
+        prefix = m.path.split(".", 1)[1] if m.path.startswith("scene.") else m.path
+        for slot, name in ((m.s1, "sigma_t"), (m.s2, "albedo")):
+            tex = textures.items[slot]
+            if slot >= first_slot and tex.path == f"{prefix}.{name}":
+                tex.path = f"{prefix}.{name}.value"
+
+    @staticmethod
+    def _unit_factor(loader, path, emitter=False) -> int:
+        """A constant 1 slot that multiplies a grid: internal, not a scene parameter."""
+        slot = load_spectrum(loader, 1.0, path, emitter=emitter)
+        loader.textures.items[slot].traversed = False
+        return slot
 
     def _spectrum(self, loader, props, name, default, bounded=False):
         """A constant spectrum slot (float, rgb, spectrum, or Mitsuba's constvolume)."""
@@ -141,7 +168,7 @@ class MediumSet:
         if isinstance(v, dict) and v.get("type") == "gridvolume":
             gid, to_local = self._gridvolume(loader, Props(v, props.key(name), loader), form, props.key(name))
             self._set_bounds(m, to_local, props.key(name))
-            return load_spectrum(loader, 1.0, props.key(name), emitter=False), gid
+            return self._unit_factor(loader, props.key(name)), gid
         return self._spectrum(loader, props, name, default, bounded=(form == "albedo")), NO_GRID
 
     def _gridvolume(self, loader, p: Props, form, path):
@@ -276,7 +303,7 @@ class MediumSet:
         if ga.shape[:3] != gs.shape[:3]:
             raise props.error("sigma_s", f"grid shape {gs.shape[:3]} differs from sigma_a's {ga.shape[:3]}")
         m.g1, m.g2 = self.grids.add(ga, "unbounded"), self.grids.add(gs, "unbounded")
-        m.s1 = m.s2 = load_spectrum(loader, 1.0, props.path, emitter=False)
+        m.s1 = m.s2 = self._unit_factor(loader, props.path)
         m.scale = props.float("scale", 1.0, min=0.0)
         self._bounds(props, m)
 
@@ -290,7 +317,7 @@ class MediumSet:
         if props.type == "rgbgrid" and not isinstance(v, (dict, int, float)):
             # RGB emission: unbounded per-voxel spectra times the illuminant (D65).
             m.ge = self.grids.add(as_grid(v, props.key("Le")), "unbounded")
-            m.le = load_spectrum(loader, 1.0, props.key("Le"), emitter=True)
+            m.le = self._unit_factor(loader, props.key("Le"), emitter=True)
             return
         m.le = load_spectrum(loader, v, props.key("Le"), emitter=True)
         if loader.textures.kind_of(m.le) != CONSTANT:
@@ -339,7 +366,9 @@ class MediumSet:
         self.ge = u32(m.ge for m in ms)
         self.le_scale = mi.Float([m.le_scale for m in ms])
         self.phase_kind = u32(m.phase[0] for m in ms)
-        self.phase_g = mi.Float([float(np.clip(m.phase[1], -G_MAX, G_MAX)) for m in ms])
+        self.phase_g = param_table([dr.clip(m.owner.params["phase_function.g"], -G_MAX, G_MAX)
+                                    if "phase_function.g" in m.owner.params
+                                    else float(np.clip(m.phase[1], -G_MAX, G_MAX)) for m in ms])
         if self.has_grid:
             self._build_majorants()
 

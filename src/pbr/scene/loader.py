@@ -25,6 +25,8 @@ from ..lights import LIGHT_TYPES, LightSet
 from ..media import MEDIUM_TYPES, MediumSet
 from ..plugins.props import Props, SceneError
 from ..textures import TEXTURE_TYPES, TextureSet, load_spectrum
+from .objects import load_object
+from .params import mitsuba_key_paths
 from .scene import Scene, ShapeList
 from .xml import parse_file
 
@@ -182,6 +184,7 @@ class Loader:
             if t in SENSORS:
                 sp = Props(v, path, self)
                 sensor = SENSORS[t](sp)
+                sensor.id = str(v.get("id", key))
                 # The medium the camera sits in (Mitsuba: a medium nested in the sensor).
                 med = [(k, c) for k, c in sp.children() if self.is_medium(c)]
                 if len(med) > 1:
@@ -213,17 +216,24 @@ class Loader:
             integrator_props = Props({"type": "path"}, "scene.integrator", self)
         integrator = INTEGRATORS[integrator_props.type](integrator_props)
         return Scene(self.textures, self.bsdfs, self.lights, self.media, shapes, sensors, integrator,
-                     self.bsdf_textures)
+                     self.bsdf_textures, mitsuba_key_paths(self.d))
 
 
-def load_dict(d: dict, base_dir: str | None = None) -> Scene:
-    """Build a :class:`pbr.scene.Scene` from a Mitsuba-style scene dict."""
-    backend.ensure()
+@backend.uses_pbr_variant
+def load_dict(d: dict, base_dir: str | None = None, parallel: bool = True, optimize: bool = True):
+    """Build a :class:`pbr.scene.Scene` from a Mitsuba-style scene dict; a dict of an
+    integrator or sensor type gives that plugin (see :mod:`.objects`). ``parallel`` and
+    ``optimize`` are Mitsuba's keywords, accepted and ignored: pbr loads on one thread
+    and never merges shapes (Mitsuba's ``optimize=False``, which keeps each shape's id)."""
+    if isinstance(d, dict) and d.get("type") != "scene" and "type" in d:
+        return load_object(d)
     return Loader(d, base_dir).load()
 
 
-def load_file(path: str, **kwargs) -> Scene:
-    """Load a Mitsuba XML scene; keyword arguments override its ``<default>`` values."""
+@backend.uses_pbr_variant
+def load_file(path: str, parallel: bool = True, optimize: bool = True, **kwargs):
+    """Load a Mitsuba XML scene; keyword arguments override its ``<default>`` values.
+    ``parallel`` and ``optimize`` are Mitsuba's keywords, ignored (see :func:`load_dict`)."""
     if not os.path.exists(path):
         raise FileNotFoundError(f"{path}: scene file not found")
     ext = os.path.splitext(path)[1].lower()

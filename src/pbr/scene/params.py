@@ -1,9 +1,33 @@
-"""``pbr.traverse``: the differentiable parameters of a scene, under Mitsuba-style keys.
+"""``pbr.traverse``: a scene's parameters under ``mi.traverse``'s keys, with
+``mitsuba.SceneParameters``'s methods.
 
-Keys follow ``mi.traverse`` for the same plugins (``red.reflectance.value``,
-``light.emitter.radiance.value``, ``<id>.reflectance.data`` for bitmaps). Values are
-Dr.Jit arrays: enable gradients on them or assign new values, then call ``update()``
-to rebuild the scene's tables (which keeps the AD graph to the parameters).
+Three kinds of keys (``flags(key)`` tells them apart, with Mitsuba's ``mi.ParamFlags``):
+
+- pbr's differentiable parameters: textures, BSDF scalars, emitter radiance, media
+  (``red.reflectance.value``, ``light.emitter.radiance.value``, ``<id>.reflectance.data``
+  for bitmaps, ``ball.interior_medium.sigma_t.value.value``, ``smoke.sigma_t.data``).
+  Enable gradients on them or assign new values, then call ``update()`` to rebuild the
+  scene's tables (which keeps the AD graph to the parameters).
+- geometry, Mitsuba's own keys of the shapes pbr hands to Mitsuba: ``<shape>.to_world``
+  (rectangle, disk, sphere, cylinder), ``<mesh>.vertex_positions``, ``vertex_normals``,
+  ``vertex_texcoords``, ``faces``. ``update()`` lets Mitsuba rebuild the shapes and its
+  ray-tracing acceleration structure, then rebuilds pbr's tables (emissive shapes move
+  their lights). Not differentiable in pbr (a render with gradients on them is refused).
+- the sensor: ``<sensor>.to_world`` (rigid), ``x_fov`` (degrees), ``near_clip``,
+  ``far_clip``, ``principal_point_offset_x``/``_y``; the film's ``size``, ``crop_size``
+  and ``crop_offset`` are read-only (load the scene with another film to change them).
+  Not differentiable in pbr.
+
+Mitsuba keys pbr does not have (documented exceptions): ``allow_thread_reordering``
+(a CUDA scheduling hint of Mitsuba's), ``<shape>.silhouette_sampling_weight`` (Mitsuba's
+projective integrators), ``<sensor>.shutter_open`` / ``shutter_open_time`` (no motion
+blur), ``<emitter>.sampling_weight`` (pbr's light samplers weigh lights by power or its
+BVH), ``<emitter>.radiance.d65.*`` (an RGB emitter's D65 factor is fixed in pbr), and the
+``object_...`` names of shapes Mitsuba merges by default (pbr never merges shapes: its
+keys are those of ``mi.load_dict(d, optimize=False)``).
+
+As in Mitsuba, iterating over the parameters gives ``(key, value)`` pairs, ``update(values)``
+skips keys it does not have, and ``keep`` takes a regular expression or a list of them.
 
 ``tables_as_leaves``: forward-mode differentiation inside a symbolic loop can only start
 from variables whose tangents are already known; it may not cross an edge built outside
@@ -15,48 +39,127 @@ carry the tangent the parameters give them.
 from __future__ import annotations
 
 import contextlib
+import re
 
 import drjit as dr
+import mitsuba as mi
+import numpy as np
 
+from .. import backend
+from ..bsdfs import bsdf_names
+from ..cameras import SENSORS
+from ..geometry import SHAPE_PARAMS
+from ..lights import LIGHT_TYPES
+from ..media import MEDIUM_TYPES
 from ..plugins.tables import map_tables
+from .views import variant_types
+
+# Mitsuba's shape keys that pbr exposes (Mitsuba's traversal of pbr's geometry also has
+# the placeholder BSDF Mitsuba gives every shape, and silhouette weights).
+GEOMETRY_KEYS = ("to_world", "vertex_positions", "vertex_normals", "vertex_texcoords", "faces")
+
+DIFFERENTIABLE = 0
 
 
-class SceneParameters:
-    def __init__(self, scene):
-        self.scene = scene
-        self._owners = {}
-        for tex in scene.param_owners():
-            for name in tex.params:
-                self._owners[f"{tex.path}.{name}"] = (tex, name)
-        self._dirty = set()
+def _flags(*names) -> int:
+    return int(sum(int(getattr(mi.ParamFlags, n)) for n in names))
 
-    def keys(self):
-        return self._owners.keys()
 
-    def items(self):
-        return [(k, self[k]) for k in self._owners]
+def _matrix(value, key: str) -> np.ndarray:
+    """A 4x4 float64 matrix from a Mitsuba transform (anything with ``.matrix``) or an
+    array-like."""
+    m = value.matrix if hasattr(value, "matrix") else value
+    try:
+        a = np.array(m, dtype=np.float64)
+    except Exception as e:
+        raise TypeError(f"{key}: expected a Mitsuba transform or a 4x4 matrix, got {type(value).__name__}: {e}") from None
+    a = a.reshape(a.shape[:2]) if a.ndim == 3 and a.shape[2] == 1 else a
+    if a.shape != (4, 4):
+        raise ValueError(f"{key}: expected a 4x4 transform, got shape {a.shape}")
+    return a
 
-    def __contains__(self, key):
-        return key in self._owners
 
-    def __len__(self):
-        return len(self._owners)
+# Mitsuba's names of a shape's children, in the order its traversal visits them.
+SHAPE_CHILDREN = ("bsdf", "emitter", "interior_medium", "exterior_medium")
 
-    def __iter__(self):
-        return iter(self._owners)
 
-    def _owner(self, key):
-        if key not in self._owners:
-            raise KeyError(f"{key!r} is not a parameter of this scene; known keys: {', '.join(self._owners)}")
-        return self._owners[key]
+def mitsuba_key_paths(d: dict) -> dict:
+    """Declared key path -> ``mi.traverse``'s key path, for the objects of scene dict
+    ``d`` whose keys differ (paths without the leading ``scene.``).
 
-    def __getitem__(self, key):
-        tex, name = self._owner(key)
-        return tex.params[name]
+    ``mi.traverse`` names a shape's children by role (``<shape>.bsdf``, ``.emitter``,
+    ``.interior_medium``, ``.exterior_medium``) and a sensor's medium ``<sensor>.medium``,
+    whatever their keys in the dict (the XML reader names unnamed children ``emitter_0``).
+    It lists an object once, where the traversal first reaches it: the top-level entries
+    in order, each followed by its children; so a BSDF or medium referenced by a shape
+    (or the sensor) declared before it takes that shape's key (``s.bsdf``)."""
+    ids = {}
 
-    def __setitem__(self, key, value):
-        tex, name = self._owner(key)
-        old = tex.params[name]
+    def collect(v, path, top):
+        for k, c in v.items():
+            if isinstance(c, dict) and "type" in c and c["type"] != "ref":
+                p = f"{path}.{k}" if path else k
+                oid = c.get("id", k if top else None)
+                if oid is not None:
+                    ids.setdefault(str(oid), (p, c["type"]))
+                collect(c, p, False)
+
+    collect(d, "", True)
+    out, reached = {}, set()
+
+    def reach(declared, key):
+        if declared not in reached:
+            reached.add(declared)
+            if declared != key:
+                out[declared] = key
+
+    def role(k, c, owner_type):
+        t = ids.get(c.get("id"), (None, None))[1] if c["type"] == "ref" else c["type"]
+        if owner_type in SENSORS:
+            return "medium" if t in MEDIUM_TYPES else None
+        if k in ("interior", "exterior"):
+            return f"{k}_medium"
+        return "bsdf" if t in bsdf_names() else ("emitter" if t in LIGHT_TYPES else None)
+
+    for key, v in d.items():
+        if not isinstance(v, dict) or "type" not in v:
+            continue
+        reach(key, key)
+        if v["type"] not in SHAPE_PARAMS and v["type"] not in SENSORS:
+            continue
+        children = [(role(k, c, v["type"]), k, c) for k, c in v.items() if isinstance(c, dict) and "type" in c]
+        order = SHAPE_CHILDREN + ("medium",)
+        for name, k, c in sorted((x for x in children if x[0]), key=lambda x: order.index(x[0])):
+            target = ids.get(c.get("id")) if c["type"] == "ref" else None
+            reach(target[0] if target else f"{key}.{k}", f"{key}.{name}")
+    return out
+
+
+def rename_key_paths(owners, paths: dict) -> None:
+    """Give each parameter owner the key path of :func:`mitsuba_key_paths` (the longest
+    declared prefix of its path that ``paths`` renames)."""
+    for owner in owners:
+        parts = owner.path.split(".")
+        for n in range(len(parts), 0, -1):
+            new = paths.get(".".join(parts[:n]))
+            if new is not None:
+                owner.path = ".".join([new] + parts[n:])
+                break
+
+
+class _Param:
+    """One key: how to read and write it, its Mitsuba flags, and what it belongs to."""
+
+    kind = "pbr"
+
+    def __init__(self, owner, name, flags=DIFFERENTIABLE):
+        self.owner, self.name, self.flags = owner, name, flags
+
+    def get(self):
+        return self.owner.params[self.name]
+
+    def set(self, key, value):
+        old = self.get()
         tp = type(old)
         if type(value) is not tp:
             try:
@@ -65,55 +168,302 @@ class SceneParameters:
                 raise TypeError(f"{key}: cannot convert {type(value).__name__} to {tp.__name__}: {e}") from None
         if dr.width(value) != dr.width(old) or getattr(value, "shape", None) != getattr(old, "shape", None):
             raise ValueError(f"{key}: shape {getattr(value, 'shape', None)} does not match {getattr(old, 'shape', None)}")
-        tex.params[name] = value
+        self.owner.params[self.name] = value
+
+
+class _GeometryParam(_Param):
+    """A key of Mitsuba's traversal of the geometry (``mp``: its ``SceneParameters``)."""
+
+    kind = "geometry"
+
+    def __init__(self, mp, mkey, shape):
+        super().__init__(shape, mkey, _flags("NonDifferentiable"))
+        self.mp = mp
+
+    def get(self):
+        return self.mp[self.name]
+
+    def set(self, key, value):
+        if self.name.endswith(".to_world"):
+            value = variant_types().Transform4f(_matrix(value, key).tolist())
+        self.mp[self.name] = value
+
+
+class _SensorParam(_Param):
+    """A sensor attribute: ``to_world`` (a 4x4 array on pbr's camera), ``pp`` components,
+    or a float."""
+
+    kind = "sensor"
+
+    def __init__(self, camera, name, read_only=False):
+        flags = _flags("NonDifferentiable", "ReadOnly") if read_only else _flags("NonDifferentiable")
+        super().__init__(camera, name, flags)
+
+    def get(self):
+        t, cam = variant_types(), self.owner
+        if self.name == "to_world":
+            return t.Transform4f(np.asarray(cam.to_world, np.float64).tolist())
+        if self.name.startswith("principal_point_offset_"):
+            return t.Float(cam.pp["xy".index(self.name[-1])])
+        if self.name == "x_fov":
+            return t.Float(cam.x_fov)
+        if self.name.startswith("film."):
+            film = cam.film
+            w, h = film.size
+            if self.name == "film.size":
+                return t.ScalarVector2u(w, h)
+            if self.name == "film.crop_size":
+                return t.ScalarVector2u(*getattr(film, "crop_size", (w, h)))
+            return t.ScalarPoint2u(*getattr(film, "crop_offset", (0, 0)))
+        return float(getattr(cam, self.name))
+
+    def set(self, key, value):
+        cam = self.owner
+        if self.name == "to_world":
+            m = _matrix(value, key)
+            lin = m[:3, :3]
+            if not np.allclose(lin.T @ lin, np.eye(3), atol=1e-4):
+                raise ValueError(f"{key}: the camera-to-world transform must be rigid (no scale or shear)")
+            cam.to_world = m
+            return
+        try:
+            v = float(np.asarray(value, np.float64).ravel()[0]) if not isinstance(value, (int, float)) else float(value)
+        except Exception as e:
+            raise TypeError(f"{key}: expected a number, got {type(value).__name__}: {e}") from None
+        if self.name.startswith("principal_point_offset_"):
+            pp = list(cam.pp)
+            pp["xy".index(self.name[-1])] = v
+            cam.pp = tuple(pp)
+        elif self.name == "x_fov":
+            if not 0.0 < v < 180.0:
+                raise ValueError(f"{key}: expected a field of view in (0, 180) degrees, got {v}")
+            cam.x_fov = v
+        else:
+            if v < 0:
+                raise ValueError(f"{key}: expected a distance >= 0, got {v}")
+            near, far = (v, cam.far_clip) if self.name == "near_clip" else (cam.near_clip, v)
+            if far <= near:
+                raise ValueError(f"{key}: far_clip ({far}) must exceed near_clip ({near})")
+            setattr(cam, self.name, v)
+
+
+def _sensor_params(camera) -> dict:
+    """name -> _SensorParam for the attributes ``camera`` has."""
+    out = {}
+    for name in ("near_clip", "far_clip", "x_fov", "to_world"):
+        if hasattr(camera, name):
+            out[name] = _SensorParam(camera, name)
+    if hasattr(camera, "pp"):
+        for axis in "xy":
+            out[f"principal_point_offset_{axis}"] = _SensorParam(camera, f"principal_point_offset_{axis}")
+    if hasattr(camera, "film"):
+        for name in ("film.size", "film.crop_size", "film.crop_offset"):
+            out[name] = _SensorParam(camera, name, read_only=True)
+    return out
+
+
+class SceneParameters:
+    """The parameters of a pbr scene, with the methods of ``mitsuba.SceneParameters``
+    (see the module docstring). Made by :func:`traverse`."""
+
+    def __init__(self, scene):
+        self.scene = scene
+        params: dict[str, _Param] = {}
+        for i, cam in enumerate(scene.sensors):
+            sid = getattr(cam, "id", "sensor" if i == 0 else f"sensor_{i}")
+            for name, p in _sensor_params(cam).items():
+                params[f"{sid}.{name}"] = p
+        for owner in scene.param_owners():
+            if not getattr(owner, "traversed", True):
+                continue
+            for name in owner.params:
+                params[f"{owner.path}.{name}"] = _Param(owner, name)
+        self._mp = mi.traverse(scene.mi_scene)
+        shapes = {s.id(): s for s in scene.mi_scene.shapes()}
+        for mkey in self._mp.keys():
+            sid, _, name = mkey.rpartition(".")
+            if name in GEOMETRY_KEYS and sid in shapes and mkey not in params:
+                params[mkey] = _GeometryParam(self._mp, mkey, shapes[sid])
+        self._params = params
+        self._dirty: set[str] = set()
+        self._geometry_read = False
+
+    # -- mapping ----------------------------------------------------------------------
+    def keys(self):
+        return self._params.keys()
+
+    def values(self):
+        return [self[k] for k in self._params]
+
+    def items(self):
+        """``(key, value)`` pairs (a list)."""
+        return [(k, self[k]) for k in self._params]
+
+    def __iter__(self):
+        """``(key, value)`` pairs, as iterating over Mitsuba's ``SceneParameters`` gives."""
+        return iter(self.items())
+
+    def __contains__(self, key):
+        return key in self._params
+
+    def __len__(self):
+        return len(self._params)
+
+    def _param(self, key) -> _Param:
+        if key not in self._params:
+            near = [k for k in self._params if key.split(".")[0] == k.split(".")[0]] or list(self._params)
+            raise KeyError(f"{key!r} is not a parameter of this scene; known keys: {', '.join(near)}")
+        return self._params[key]
+
+    def __getitem__(self, key):
+        p = self._param(key)
+        if p.kind == "geometry":
+            self._geometry_read = True   # Mitsuba's parameters notice in-place changes
+        return p.get()
+
+    def get(self, key, default=None):
+        """``params[key]``, or ``default`` when the scene has no such key."""
+        return self[key] if key in self._params else default
+
+    def __setitem__(self, key, value):
+        p = self._param(key)
+        if p.flags & int(mi.ParamFlags.ReadOnly):
+            raise ValueError(f"{key} is read-only in pbr (load the scene with another film to change it)")
+        p.set(key, value)
         self._dirty.add(key)
 
-    def update(self, values: dict | None = None):
-        """Apply ``values`` (if given), then rebuild the tables that depend on parameters.
+    def __delitem__(self, key):
+        self._param(key)
+        del self._params[key]
+
+    def flags(self, key) -> int:
+        """Mitsuba's ``ParamFlags`` of ``key``: 0 (differentiable) for pbr's parameters,
+        ``NonDifferentiable`` for geometry and sensor keys (``| ReadOnly`` for the film's)."""
+        return self._param(key).flags
+
+    def set_dirty(self, key) -> None:
+        """Mark ``key`` as changed (after an in-place change such as ``dr.scatter`` into
+        its value): the next :meth:`update` refreshes what depends on it."""
+        p = self._param(key)
+        if p.kind == "geometry":
+            self._mp.set_dirty(p.name)
+        self._dirty.add(key)
+
+    def keep(self, keys) -> None:
+        """Keep only the keys that match ``keys``: a regular expression (matched at the start
+        of the key, as ``re.match``), a list of them, or None for the differentiable keys."""
+        if keys is None:
+            kept = [k for k, p in self._params.items() if p.flags == DIFFERENTIABLE]
+        else:
+            regexps = [re.compile(k).match for k in (keys if isinstance(keys, (list, tuple)) else [keys])]
+            kept = [k for k in self._params if any(r(k) for r in regexps)]
+        self._params = {k: self._params[k] for k in kept}
+
+    def copy(self) -> "SceneParameters":
+        c = object.__new__(SceneParameters)
+        c.__dict__.update(self.__dict__)
+        c._params, c._dirty = dict(self._params), set()
+        return c
+
+    # -- update -------------------------------------------------------------------------
+    def update(self, values: dict | None = None) -> list:
+        """Apply ``values`` (keys this object lacks are skipped, as Mitsuba does), then
+        refresh what depends on the changed parameters. Returns Mitsuba's kind of answer:
+        a list of ``(object, set of parameter names)`` for each object that changed.
 
         When every changed key is a BSDF's constant or bitmap texture or a BSDF's own
         scalar (a dielectric's or coating's ``eta``), only those value tables are
         recomputed, with Dr.Jit operations alone (so that an update can be part of a
-        ``dr.freeze``-recorded step); otherwise, and when nothing was assigned (e.g. after
-        ``dr.enable_grad(params[k])``), the whole scene is rebuilt."""
+        ``dr.freeze``-recorded step). Sensor keys need nothing rebuilt (the next render
+        reads them). Geometry keys make Mitsuba rebuild the shapes and its acceleration
+        structure (pending kernels are evaluated first: they hold a reference to it).
+        Otherwise, and when nothing was assigned (e.g. after ``dr.enable_grad(params[k])``),
+        the whole scene is rebuilt."""
+        with backend.pbr_variant():
+            return self._update(values)
+
+    def _update(self, values):
         for k, v in (values or {}).items():
-            self[k] = v
-        # Values-only refreshes that cover every changed key (None: a rebuild is needed).
-        tex = self.scene.textures
-        slot_of = {id(t): i for i, t in enumerate(tex.items)}
-        family_of = {id(o): f for f in self.scene.bsdfs.families.values()
-                     if hasattr(f, "refresh_params") for o in f.param_owners()}
-        refreshes = set() if self._dirty else None
-        for k in self._dirty:
-            o = self._owners[k][0]
-            if slot_of.get(id(o)) in self.scene.bsdf_slots and tex.refreshable(o):
-                refreshes.add(tex.refresh)
-            elif id(o) in family_of:
-                refreshes.add(family_of[id(o)].refresh_params)
-            else:
-                refreshes = None
-                break
-        if refreshes is not None:
-            for refresh in refreshes:
-                refresh()
-        else:
-            if dr.flag(dr.JitFlag.FreezingScope):
+            if k in self._params:
+                self[k] = v
+        params = self._params
+        dirty = {k: params[k] for k in self._dirty if k in params}
+        geometry = [k for k, p in dirty.items() if p.kind == "geometry"]
+        sensors = [k for k, p in dirty.items() if p.kind == "sensor"]
+        pbr_keys = [k for k, p in dirty.items() if p.kind == "pbr"]
+        changed: dict[int, tuple] = {}
+        for k, p in dirty.items():
+            changed.setdefault(id(p.owner), (p.owner, set()))[1].add(p.name.rsplit(".", 1)[-1])
+        freezing = dr.flag(dr.JitFlag.FreezingScope)
+        if freezing and (geometry or sensors):
+            raise RuntimeError(
+                f"params.update(): {', '.join(sorted(geometry + sensors))} cannot be updated inside a "
+                "dr.freeze-recorded function (a recording replays the geometry and camera it saw)")
+        rebuild = False
+        if geometry or (self._geometry_read and not freezing):
+            dr.eval()                           # kernels that reference the old geometry
+            for obj, names in self._mp.update():
+                if obj is not self.scene.mi_scene:
+                    changed.setdefault(id(obj), (obj, set()))[1].update(names)
+                rebuild = True
+            self._geometry_read = False
+        if not rebuild and (pbr_keys or not dirty):
+            rebuild = not self._refresh_values(pbr_keys) if pbr_keys else True
+        if rebuild:
+            if freezing:
                 raise RuntimeError(
-                    f"params.update(): {', '.join(sorted(self._dirty)) or 'an update with no assigned keys'} "
+                    f"params.update(): {', '.join(sorted(pbr_keys)) or 'an update with no assigned keys'} "
                     "needs a rebuild of the scene's tables, which reads parameters on the host and "
                     "cannot be recorded by dr.freeze; inside a frozen function only BSDF textures "
                     "(constant or bitmap, e.g. '<bsdf>.reflectance.value' / '.data') and a BSDF's "
                     "'eta' can be updated")
             self.scene.build()
         self._dirty.clear()
-        return self
+        return list(changed.values())
+
+    def _refresh_values(self, keys) -> bool:
+        """Refresh the value tables of ``keys`` without a rebuild when each is a BSDF's
+        constant or bitmap texture or a BSDF family's own scalar; False if one is not."""
+        tex = self.scene.textures
+        slot_of = {id(t): i for i, t in enumerate(tex.items)}
+        family_of = {id(o): f for f in self.scene.bsdfs.families.values()
+                     if hasattr(f, "refresh_params") for o in f.param_owners()}
+        refreshes = set()
+        for k in keys:
+            o = self._params[k].owner
+            if slot_of.get(id(o)) in self.scene.bsdf_slots and tex.refreshable(o):
+                refreshes.add(tex.refresh)
+            elif id(o) in family_of:
+                refreshes.add(family_of[id(o)].refresh_params)
+            else:
+                return False
+        for refresh in refreshes:
+            refresh()
+        return True
+
+    # -- internal -----------------------------------------------------------------------
+    def differentiable_values(self) -> dict:
+        """key -> value of the kept differentiable parameters that have gradients enabled."""
+        out = {}
+        for k, p in self._params.items():
+            if p.kind == "pbr":
+                v = p.get()
+                if dr.grad_enabled(v):
+                    out[k] = v
+        return out
 
     def __repr__(self):
-        rows = [f"  {k}: {type(v).__name__}{list(getattr(v, 'shape', ()))}" for k, v in self.items()]
+        rows = []
+        for k, p in self._params.items():
+            v = p.get()
+            f = "R" if p.flags & int(mi.ParamFlags.ReadOnly) else ("" if p.flags else "∂")
+            rows.append(f"  {k}: {f:2} {type(v).__name__}{list(getattr(v, 'shape', ()))}")
         return "SceneParameters[\n" + "\n".join(rows) + "\n]"
 
 
+@backend.uses_pbr_variant
 def traverse(scene) -> SceneParameters:
+    """The parameters of ``scene`` (a :class:`SceneParameters`; ``mi.traverse``'s keys)."""
     return SceneParameters(scene)
 
 

@@ -1,5 +1,9 @@
 """The assembled scene: geometry (in Mitsuba), and pbr's texture, BSDF, light and medium
-tables, with what the loader recorded about each shape."""
+tables, with what the loader recorded about each shape.
+
+A :class:`Scene` also answers the calls Mitsuba scripts make on ``mi.Scene``:
+``scene.sensors()``, ``scene.shapes()``, ``scene.emitters()``, ``scene.bbox()``
+(:mod:`.views`)."""
 
 from __future__ import annotations
 
@@ -9,6 +13,8 @@ import mitsuba as mi
 from ..geometry import Geometry
 from ..plugins.tables import own_table_memory
 from ..textures import meshattr
+from .params import rename_key_paths
+from .views import EmitterView, SensorList, ShapeView
 
 
 class ShapeList:
@@ -30,7 +36,9 @@ class ShapeList:
 
 class Scene:
     def __init__(self, textures, bsdfs, lights, media, shapes: ShapeList, sensors, integrator,
-                 bsdf_textures: dict):
+                 bsdf_textures: dict, key_paths: dict | None = None):
+        """``key_paths``: declared key path -> ``mi.traverse``'s, for the parameter owners
+        (:func:`.params.mitsuba_key_paths`)."""
         self.textures = textures
         self.bsdfs = bsdfs
         self.lights = lights
@@ -38,6 +46,12 @@ class Scene:
         self.geometry = Geometry(shapes.geometry)
         self.mi_scene = self.geometry.mi_scene
         self.shape_ids = shapes.ids
+        # Mitsuba's shapes take pbr's ids (Geometry named them by position), so that
+        # scene.shapes()[i].id() and mi.traverse keys of the geometry read as the scene's.
+        for i, sid in enumerate(shapes.ids):
+            self.geometry.mi_shape(i).set_id(str(sid))
+        self.shape_emitter = list(shapes.light)   # emitter index + 1 per shape (0: none)
+        self.media_of_shape = list(shapes.media)  # [interior, exterior] medium index + 1
         self.shape_paths = shapes.paths        # key paths, e.g. "scene.red-wall"
         meshattr.bind(self.textures, shapes.geometry, shapes.bsdf, shapes.ids, bsdf_textures)
         # Texture slots only BSDFs read (in kernels): lights and media also read theirs on
@@ -49,8 +63,10 @@ class Scene:
         self.shape_interior = mi.UInt32([a for a, _ in shapes.media])
         self.shape_exterior = mi.UInt32([b for _, b in shapes.media])
         self.shape_transition = mi.Bool([a > 0 or b > 0 for a, b in shapes.media])
-        self.sensors = sensors
+        # A list (pbr's code indexes it) that can also be called like Mitsuba's method.
+        self.sensors = SensorList(sensors)
         self.integrator = integrator
+        rename_key_paths(self.param_owners(), key_paths or {})
         self.build()
 
     def build(self) -> None:
@@ -76,6 +92,21 @@ class Scene:
             for fam in group.values():
                 owners += getattr(fam, "param_owners", lambda: [])()
         return owners + self.media.param_owners()
+
+    # -- Mitsuba's Scene methods ------------------------------------------------------
+    def shapes(self) -> list:
+        """The shapes in scene order, as :class:`~.views.ShapeView` (Mitsuba's shape
+        object, with pbr's emitter and media)."""
+        return [ShapeView(self, i) for i in range(len(self.shape_ids))]
+
+    def emitters(self) -> list:
+        """The emitters in scene order (area emitters where their shape was declared),
+        as :class:`~.views.EmitterView`."""
+        return [EmitterView(self, g) for g in range(len(self.lights.entries))]
+
+    def bbox(self):
+        """Bounding box of the geometry (Mitsuba's ``ScalarBoundingBox3f``)."""
+        return self.mi_scene.bbox()
 
     def requires_grad(self) -> bool:
         return any(dr.grad_enabled(v) for t in self.param_owners() for v in t.params.values())

@@ -1,0 +1,62 @@
+"""README.md's code runs as pasted: every ```python block, in order, in one fresh
+interpreter started in a directory where the repository's ``scenes/`` is reachable (the
+README's paths are relative to the repository root), and every ```text block that follows
+a Python block is what that code printed."""
+
+import os
+import re
+import subprocess
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+FENCE = re.compile(r"^```(\w*)\n(.*?)^```", re.S | re.M)
+
+
+def readme_blocks(text: str) -> list[tuple[str, str]]:
+    """(language, code) of each fenced block of ``text``, in order."""
+    return [(m.group(1), m.group(2)) for m in FENCE.finditer(text)]
+
+
+def script_of(blocks) -> tuple[str, list[tuple[int, str]]]:
+    """One script running the Python blocks in order, each announced by a marker line,
+    and the ``text`` blocks each expected after Python block ``i``."""
+    lines, expected, n = [], [], -1
+    for lang, code in blocks:
+        if lang == "python":
+            n += 1
+            lines.append(f"print('@@block {n}', flush=True)")
+            lines.append(code)
+        elif lang == "text" and n >= 0:
+            expected.append((n, code))
+    return "\n".join(lines), expected
+
+
+def output_of_block(stdout: str, n: int) -> str:
+    part = stdout.split(f"@@block {n}\n", 1)[1]
+    return part.split("@@block ", 1)[0]
+
+
+def test_readme_blocks_are_found():
+    blocks = readme_blocks("a\n```python\nx = 1\n```\n\n```text\n1\n```\n```sh\nls\n```\n")
+    assert blocks == [("python", "x = 1\n"), ("text", "1\n"), ("sh", "ls\n")]
+    script, expected = script_of(blocks)
+    assert "x = 1" in script and expected == [(0, "1\n")]
+
+
+def test_readme_python_blocks_run(tmp_path):
+    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as f:
+        blocks = readme_blocks(f.read())
+    script, expected = script_of(blocks)
+    assert sum(lang == "python" for lang, _ in blocks) >= 4 and expected
+    os.symlink(os.path.join(ROOT, "scenes"), tmp_path / "scenes")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [os.path.join(ROOT, "src")] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path,
+                         env=env, timeout=600)
+    assert out.returncode == 0, f"README code failed:\n{out.stdout[-3000:]}\n{out.stderr[-3000:]}"
+    assert (tmp_path / "out.exr").exists()
+    for n, text in expected:
+        printed = output_of_block(out.stdout, n).splitlines()
+        for line in text.splitlines():
+            assert any(p.startswith(line.rstrip(". ")) for p in printed), (
+                f"README says block {n} prints {line!r}; it printed:\n" + "\n".join(printed))
