@@ -36,9 +36,9 @@ def test_film_bytes_follow_dr_jit_allocations():
 
 @pytest.mark.skipif(pbr.get_backend() != "llvm", reason="an address-space limit bounds host memory only")
 def test_no_segfault_under_an_address_space_limit():
-    code = textwrap.dedent("""
+    code = textwrap.dedent(f"""
         import resource, pbr
-        pbr.set_backend("llvm")
+        pbr.set_backend({pbr.get_backend()!r})
         resource.setrlimit(resource.RLIMIT_AS, (6 << 30, resource.RLIM_INFINITY))
         try:
             pbr.render(pbr.load_dict(pbr.cornell_box(30000, 1)), spp=1)
