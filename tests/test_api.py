@@ -147,3 +147,24 @@ def test_a_medium_reference_is_not_taken_for_the_shapes_bsdf():
     s = scene.shape_ids.index("small-box")
     assert np.array(scene.shape_interior)[s] == 1
     assert scene.bsdfs.entries[np.array(scene.shape_bsdf)[s]][0] == "diffuse"
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"spp": 2.5}, "spp must be a non-negative integer, got 2.5"),
+    ({"spp": -1}, "spp must be a non-negative integer, got -1"),
+    ({"spp_grad": "4"}, "spp_grad must be a non-negative integer, got '4'"),
+    ({"seed": 2**32}, r"seed must be an integer in \[0, 2\^32\) \(seeds are 32-bit\), got 4294967296"),
+    ({"seed": -1}, r"seed must be an integer in \[0, 2\^32\)"),
+    ({"seed_grad": True}, r"seed_grad must be an integer in \[0, 2\^32\) or a mi.UInt32, got True"),
+])
+def test_bad_spp_and_seeds_are_clear_errors(kwargs, message):
+    scene = pbr.load_dict(pbr.cornell_box(8, 4))
+    with pytest.raises(ValueError, match=f"render: {message}"):
+        pbr.render(scene, **kwargs)
+
+
+def test_largest_seed_and_numpy_counts_are_accepted():
+    scene = pbr.load_dict(pbr.cornell_box(8, 4))
+    a = np.asarray(pbr.render(scene, seed=2**32 - 1, spp=np.int64(4)))
+    b = np.asarray(pbr.render(scene, seed=0, spp=4))
+    assert a.shape == b.shape and not np.array_equal(a, b)

@@ -11,6 +11,7 @@ passes with seed ``seed_grad`` and ``spp_grad`` samples, decorrelated from the p
 from __future__ import annotations
 
 import contextlib
+import numbers
 
 import drjit as dr
 
@@ -49,6 +50,25 @@ def sensor_index(scene, sensor):
         scene.sensors.remove(sensor)
 
 
+def _count(name, v) -> int:
+    """A sample count: a non-negative integer (2.5 is an error, not 2)."""
+    if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 0:
+        raise ValueError(f"render: {name} must be a non-negative integer, got {v!r}")
+    return int(v)
+
+
+def _seed(name, v):
+    """A seed: an integer in [0, 2^32) (seeds are 32-bit: 2^32 would be seed 0), or a
+    width-1 mi.UInt32 (see render)."""
+    if isinstance(v, bool):
+        raise ValueError(f"render: {name} must be an integer in [0, 2^32) or a mi.UInt32, got {v!r}")
+    if isinstance(v, numbers.Integral):
+        if not 0 <= v < 1 << 32:
+            raise ValueError(f"render: {name} must be an integer in [0, 2^32) (seeds are 32-bit), got {v}")
+        return int(v)
+    return v
+
+
 class _RenderOp(dr.CustomOp):
     def eval(self, scene, params, sensor, integrator, seed, spp):
         self.scene, self.sensor, self.integrator = scene, sensor, integrator
@@ -84,8 +104,8 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
     ``dr.opaque(mi.UInt32, i)``, to a function under ``dr.freeze``: an int is baked into
     its recording)."""
     integrator = scene.integrator if integrator is None else as_integrator(integrator)
-    if spp < 0 or spp_grad < 0:
-        raise ValueError("render: spp must be >= 0")
+    spp, spp_grad = _count("spp", spp), _count("spp_grad", spp_grad)
+    seed, seed_grad = _seed("seed", seed), _seed("seed_grad", seed_grad)
     if any(s.parameters_grad_enabled() for s in scene.mi_scene.shapes()):
         raise NotImplementedError("render: a shape's geometry has gradients enabled, but pbr does not "
                                   "differentiate geometry (no edge sampling or reparameterisation): disable "
