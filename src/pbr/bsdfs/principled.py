@@ -11,7 +11,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..sampling import cosine_hemisphere_pdf, square_to_cosine_hemisphere
-from ..spectrum import cie_xyz
+from ..spectrum import cie_xyz, clamp_keep_grad
 from ..textures import load_spectrum
 from .base import BSDF_TYPES, BSDFSample, BSDFType, DIFFUSE, GLOSSY, REFLECTION, TRANSMISSION
 from .fresnel import fresnel_dielectric, reflect_about, refract_about
@@ -44,12 +44,14 @@ def _r0(eta):
 
 
 def _alphas(anisotropic, roughness, has_aniso: bool):
+    # Mitsuba's floor of 0.001 on alpha, keeping the derivative below it (the floor is
+    # numerical; an optimisation may start at roughness 0).
     r2 = roughness * roughness
     if not has_aniso:
-        a = dr.maximum(r2, 0.001)
+        a = clamp_keep_grad(r2, 0.001)
         return a, a
     aspect = dr.sqrt(1.0 - 0.9 * anisotropic)
-    return dr.maximum(r2 / aspect, 0.001), dr.maximum(r2 * aspect, 0.001)
+    return clamp_keep_grad(r2 / aspect, 0.001), clamp_keep_grad(r2 * aspect, 0.001)
 
 
 def _luminance(spectrum, lam):

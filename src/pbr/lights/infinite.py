@@ -261,7 +261,7 @@ class EnvMapLight(LightType):
         offs = np.concatenate([[0], np.cumsum([w * h for w, h in sizes])[:-1]]).astype(np.uint32)
         flat = dr.concat([i["owner"].params["data"].array for i in self.instances])
         k = dr.arange(mi.UInt32, dr.width(flat) // 3) * 3
-        rgb = mi.Color3f(*(dr.maximum(dr.gather(mi.Float, flat, k + c), 0.0) for c in range(3)))
+        rgb = mi.Color3f(*(spec.clamp_keep_grad(dr.gather(mi.Float, flat, k + c), 0.0) for c in range(3)))
         coeffs, sc = spec.rgb_unbounded(rgb)
         self.coeffs, self.tscale = mi.Array3f(coeffs), mi.Float(sc)
         self.size = mi.Array2u([w for w, _ in sizes], [h for _, h in sizes])

@@ -103,7 +103,7 @@ class GridTable:
             if tuple(data.shape) != g.shape:
                 raise ValueError(f"{owner.path}.data: shape {tuple(data.shape)} must stay {g.shape}")
             self.grids[gid] = (np.maximum(np.asarray(dr.detach(data), np.float32), 0.0), form)
-            ad[gid] = dr.maximum(data.array, 0.0)
+            ad[gid] = spec.clamp_keep_grad(data.array, 0.0)   # an empty voxel keeps its derivative
         return ad
 
     def max_bound(self, gid: int) -> np.ndarray:
