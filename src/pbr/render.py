@@ -4,6 +4,7 @@ Same signature as ``mitsuba.render``. Without gradients it runs the integrator's
 passes. When any scene parameter has gradients enabled, the image is produced by a
 ``dr.CustomOp`` whose backward (forward) derivative runs the integrator's PRB adjoint
 passes with seed ``seed_grad`` and ``spp_grad`` samples, decorrelated from the primal.
+Samples that are not finite are counted and reported (``on_nonfinite``).
 """
 
 from __future__ import annotations
@@ -11,47 +12,58 @@ from __future__ import annotations
 import drjit as dr
 
 from . import backend, dispatch
+from .integrators.base import NonFinite
 from .samplers import seed_array
 from .scene.params import tables_as_leaves, traverse
 
 
 class _RenderOp(dr.CustomOp):
-    def eval(self, scene, params, sensor, integrator, seed, spp):
+    def eval(self, scene, params, sensor, integrator, seed, spp, on_nonfinite):
         self.scene, self.sensor, self.integrator = scene, sensor, integrator
-        self.seed, self.spp = seed, spp
+        self.seed, self.spp, self.on_nonfinite = seed, spp, on_nonfinite
         with dr.suspend_grad():
             return integrator.render(scene, sensor=sensor, seed=seed[0], spp=spp[0])
 
     def forward(self):
         # The rendering loop's forward derivative starts from the tables' tangents, and
         # crosses family dispatch as per-lane selects (see pbr.dispatch).
+        counter = self.integrator.nonfinite = NonFinite(self.on_nonfinite)
         with tables_as_leaves(self.scene, self.grad_in("params")), dispatch.by_lane():
             img = self.integrator.render_forward(self.scene, sensor=self.sensor, seed=self.seed[1],
                                                  spp=self.spp[1])
         self.set_grad_out(img)
+        counter.report("pbr.render (forward derivative)")
 
     def backward(self):
+        counter = self.integrator.nonfinite = NonFinite(self.on_nonfinite)
         self.integrator.render_backward(self.scene, self.grad_out(), sensor=self.sensor,
                                         seed=self.seed[1], spp=self.spp[1])
+        counter.report("pbr.render (adjoint pass)")
 
     def name(self):
         return "pbr.render"
 
 
 def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, spp=0, spp_grad=0,
-           progress=None):
+           progress=None, on_nonfinite="warn"):
     """Render ``scene`` from sensor ``sensor``; returns ``mi.TensorXf`` (H, W, 3), linear
     sRGB (``np.asarray`` gives float32). ``spp=0`` uses the scene's sampler count. Seeds
     are Python ints or width-1 ``mi.UInt32`` (pass the latter, e.g. ``dr.opaque(mi.UInt32,
-    i)``, to a function under ``dr.freeze``: an int is baked into its recording)."""
+    i)``, to a function under ``dr.freeze``: an int is baked into its recording).
+    Samples that are NaN or infinite count as 0 in the image; ``on_nonfinite`` says what
+    to do about them after the render: 'warn' (a ``RuntimeWarning`` with their number),
+    'raise' (``FloatingPointError``) or 'ignore' (not checked inside ``dr.freeze``)."""
     backend.ensure()
     integrator = integrator or scene.integrator
+    counter = integrator.nonfinite = NonFinite(on_nonfinite)
     if not isinstance(sensor, int) or not 0 <= sensor < len(scene.sensors):
         raise ValueError(f"render: sensor index {sensor!r} out of range (scene has {len(scene.sensors)})")
     if spp < 0 or spp_grad < 0:
         raise ValueError("render: spp must be >= 0")
     if not scene.requires_grad():
-        return integrator.render(scene, sensor=sensor, seed=seed, spp=spp, progress=progress)
+        img = integrator.render(scene, sensor=sensor, seed=seed, spp=spp, progress=progress)
+        counter.report()
+        return img
     if scene.bsdfs.dispersive:
         raise NotImplementedError("render: gradients of scenes with dispersive dielectrics (a "
                                   "wavelength-dependent IOR) are not supported yet")
@@ -64,4 +76,6 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
     spp_grad = spp_grad or spp
     p = params if params is not None else traverse(scene)
     values = {k: v for k, v in p.items() if dr.grad_enabled(v)}
-    return dr.custom(_RenderOp, scene, values, sensor, integrator, (seed, seed_grad), (spp, spp_grad))
+    img = dr.custom(_RenderOp, scene, values, sensor, integrator, (seed, seed_grad), (spp, spp_grad), on_nonfinite)
+    counter.report()
+    return img

@@ -21,8 +21,8 @@ import mitsuba as mi
 import numpy as np
 
 from .. import spectrum as spec
-from ..plugins.params import ParamOwner
-from ..plugins.props import SceneError
+from ..plugins.params import ParamOwner, check_params
+from ..plugins.props import ALBEDO, NONNEGATIVE, SceneError
 
 MAJORANT_RES = 16
 """Cells per axis of the majorant grid (pbrt-v4 uses 16^3)."""
@@ -90,7 +90,10 @@ class GridTable:
         parameter ``<path>.data`` (Mitsuba's gridvolume key). Returns the grid index."""
         self.grids.append((grid, form))
         if path is not None and grid.shape[3] == 1:
-            self.owners.append((len(self.grids) - 1, ParamOwner(path, data=mi.TensorXf(grid))))
+            valid = {"data": ALBEDO if form == "albedo" else NONNEGATIVE}
+            owner = ParamOwner(path, valid=valid, data=mi.TensorXf(grid))
+            check_params(owner, path=path)
+            self.owners.append((len(self.grids) - 1, owner))
         return len(self.grids) - 1
 
     def _sync(self) -> dict:

@@ -18,6 +18,7 @@ import contextlib
 
 import drjit as dr
 
+from ..plugins.params import check_params
 from ..plugins.tables import map_tables
 
 
@@ -71,13 +72,22 @@ class SceneParameters:
     def update(self, values: dict | None = None):
         """Apply ``values`` (if given), then rebuild the tables that depend on parameters.
 
-        When every changed key is a BSDF's constant or bitmap texture or a BSDF's own
-        scalar (a dielectric's or coating's ``eta``), only those value tables are
+        Assigned values are checked first: finite, and in the parameter's range (an
+        albedo in [0, 1], radiance >= 0, ...), else ``pbr.SceneError`` naming the key (clip
+        an optimiser's values into range before the update; not checked inside
+        ``dr.freeze``). When every changed key is a BSDF's constant or bitmap texture or a
+        BSDF's own scalar (a dielectric's or coating's ``eta``), only those value tables are
         recomputed, with Dr.Jit operations alone (so that an update can be part of a
         ``dr.freeze``-recorded step); otherwise, and when nothing was assigned (e.g. after
         ``dr.enable_grad(params[k])``), the whole scene is rebuilt."""
         for k, v in (values or {}).items():
             self[k] = v
+        # The assigned values must be finite and in their ranges (a SceneError names the
+        # key). Not inside dr.freeze, which cannot read values.
+        if not dr.flag(dr.JitFlag.FreezingScope):
+            for k in sorted(self._dirty):
+                owner, name = self._owners[k]
+                check_params(owner, [name])
         # Values-only refreshes that cover every changed key (None: a rebuild is needed).
         tex = self.scene.textures
         slot_of = {id(t): i for i, t in enumerate(tex.items)}
