@@ -217,7 +217,7 @@ def _overflowing_light(integrator):
                    "to_world": T().look_at(origin=[0, 0, 3], target=[0, 0, 0], up=[0, 1, 0]),
                    "film": {"type": "hdrfilm", "width": 6, "height": 5, "rfilter": {"type": "box"}},
                    "sampler": {"type": "independent", "sample_count": 3}},
-        "wall": {"type": "rectangle", "to_world": T().scale(10.0),
+        "wall": {"type": "rectangle", "to_world": T().scale(10.0), "bsdf": {"type": "diffuse"},
                  "emitter": {"type": "area", "radiance": 3e38}}})
 
 
@@ -237,6 +237,25 @@ def test_nonfinite_samples_are_counted_and_reported():
         pbr.render(pbr.load_dict(_box()), on_nonfinite="raise")     # a clean scene: silent
     with pytest.raises(ValueError, match="on_nonfinite must be one of"):
         pbr.render(scene, on_nonfinite="stop")
+
+
+def test_nonfinite_samples_of_a_differentiable_render_are_reported_after_backward():
+    """With gradients the count is read after the derivative pass (the render does not
+    wait for its image): the primal samples' count, then the adjoint pass's."""
+    scene = _overflowing_light({"type": "prb", "max_depth": 2})
+    params = pbr.traverse(scene)
+    key = "wall.bsdf.reflectance.value"
+    dr.enable_grad(params[key])
+    params.update()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        img = pbr.render(scene, params)
+        assert not caught
+        dr.backward(dr.sum(img, axis=None))
+    assert [str(w.message)[:25] for w in caught] == ["pbr.render: 90 samples we"]
+    img = pbr.render(scene, params, on_nonfinite="raise")
+    with pytest.raises(FloatingPointError, match=r"^pbr.render: 90 samples"):
+        dr.backward(dr.sum(img, axis=None))
 
 
 def test_splatted_nonfinite_contributions_are_counted():

@@ -21,6 +21,9 @@ class _RenderOp(dr.CustomOp):
     def eval(self, scene, params, sensor, integrator, seed, spp, on_nonfinite):
         self.scene, self.sensor, self.integrator = scene, sensor, integrator
         self.seed, self.spp, self.on_nonfinite = seed, spp, on_nonfinite
+        # The primal pass's count is read after a derivative pass, not here: reading it
+        # would wait for the image while Python could trace the adjoint pass.
+        self.primal = integrator.nonfinite
         with dr.suspend_grad():
             return integrator.render(scene, sensor=sensor, seed=seed[0], spp=spp[0])
 
@@ -32,13 +35,19 @@ class _RenderOp(dr.CustomOp):
             img = self.integrator.render_forward(self.scene, sensor=self.sensor, seed=self.seed[1],
                                                  spp=self.spp[1])
         self.set_grad_out(img)
-        counter.report("pbr.render (forward derivative)")
+        self._report(counter, "pbr.render (forward derivative)")
 
     def backward(self):
         counter = self.integrator.nonfinite = NonFinite(self.on_nonfinite)
         self.integrator.render_backward(self.scene, self.grad_out(), sensor=self.sensor,
                                         seed=self.seed[1], spp=self.spp[1])
-        counter.report("pbr.render (adjoint pass)")
+        self._report(counter, "pbr.render (adjoint pass)")
+
+    def _report(self, counter, what):
+        if self.primal is not None:
+            primal, self.primal = self.primal, None
+            primal.report()
+        counter.report(what)
 
     def name(self):
         return "pbr.render"
@@ -52,7 +61,9 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
     i)``, to a function under ``dr.freeze``: an int is baked into its recording).
     Samples that are NaN or infinite count as 0 in the image; ``on_nonfinite`` says what
     to do about them after the render: 'warn' (a ``RuntimeWarning`` with their number),
-    'raise' (``FloatingPointError``) or 'ignore' (not checked inside ``dr.freeze``)."""
+    'raise' (``FloatingPointError``) or 'ignore' (not checked inside ``dr.freeze``). With
+    gradients enabled the count is read after the derivative pass (``dr.backward``,
+    ``dr.forward``), so that the render does not wait for its image."""
     backend.ensure()
     integrator = integrator or scene.integrator
     counter = integrator.nonfinite = NonFinite(on_nonfinite)
@@ -76,6 +87,4 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
     spp_grad = spp_grad or spp
     p = params if params is not None else traverse(scene)
     values = {k: v for k, v in p.items() if dr.grad_enabled(v)}
-    img = dr.custom(_RenderOp, scene, values, sensor, integrator, (seed, seed_grad), (spp, spp_grad), on_nonfinite)
-    counter.report()
-    return img
+    return dr.custom(_RenderOp, scene, values, sensor, integrator, (seed, seed_grad), (spp, spp_grad), on_nonfinite)

@@ -115,7 +115,6 @@ class _Tables:
                 "scale": mi.Float(scale), "coeffs": mi.Float(data), "res": len(scale),
             }
             cls._cache[v] = t
-            _white_derivative_np()   # read on the host: now, not first inside dr.freeze
         return cls._cache[v]
 
 
@@ -236,8 +235,6 @@ _LAMBDA_REF = 555.0
 # the one-sided derivative of this grey, where they have converged (d/dr of an albedo's
 # image under D65: 0.989 at 1e-3, 0.988 at 1e-2).
 _BLACK_PROBE = 1e-3
-# White's one-sided derivatives are secants over one table cell.
-_WHITE_STEP = 1.0 / 63.0
 
 
 def clamp_keep_grad(x, lo=None, hi=None):
@@ -307,19 +304,23 @@ def _table_lookup(r, g, b, i, z) -> mi.Array3f:
 def _white_derivative_np() -> np.ndarray:
     """Per channel (columns), the quadratic ``q`` (rows: its l^2, l, 1 coefficients)
     standing for the one-sided derivative of the albedo spectrum at white (lowering the
-    channel): the secant over one table cell (:data:`_WHITE_STEP`), as a quadratic
-    spectrum with the same D65 tristimulus values (a grey's coefficients can only move by
-    a quadratic in l)."""
+    channel): the secant to the table's neighbouring node, one cell (1 / (res - 1)) below
+    white in that channel, as a quadratic spectrum with the same D65 tristimulus values
+    (a grey's coefficients can only move by a quadratic in l). NumPy only, so that it can
+    be computed anywhere (inside kernels being traced, inside ``dr.freeze``)."""
+    scale, data = _rgb2spec_np()
+    n = len(scale) - 1
+    table = data.reshape(3, n + 1, n + 1, n + 1, 3)     # [brightest channel, z, y, x, coefficient]
+    # Lowering r or g (blue brightest by the tie rule: x = r, y = g) or b (green brightest: x = b).
+    c = np.array([table[2, n, n, n - 1], table[2, n, n - 1, n], table[1, n, n, n - 1]], np.float64)
     lam = np.arange(LAMBDA_MIN, LAMBDA_MAX + 1.0)
     xyz, d65 = cie_tables_np()
     grid = LAMBDA_MIN + _CIE_STEP * np.arange(_CIE_SAMPLES)
     w = np.stack([np.interp(lam, grid, xyz[:, k]) * np.interp(lam, grid, d65) for k in range(3)])
     V = np.stack([lam * lam, lam, np.ones_like(lam)], 1)
-    rgb = [mi.Float((1.0 - _WHITE_STEP * np.eye(3)[:, k]).astype(np.float32)) for k in range(3)]
-    c = np.array(_table_lookup(*rgb, *_dominant(*rgb)), np.float64).T
     x = c @ V.T
-    S = 0.5 + x / (2.0 * np.sqrt(1.0 + x * x))                       # (3 channels, n_lambda)
-    return np.linalg.solve(w @ V, w @ ((1.0 - S) / _WHITE_STEP).T)     # white is S = 1
+    S = 0.5 + x / (2.0 * np.sqrt(1.0 + x * x))                         # (3 channels, n_lambda)
+    return np.linalg.solve(w @ V, w @ ((1.0 - S) * n).T)                 # white is S = 1
 
 
 def _grey_coeffs(r, g, b) -> mi.Array3f:
@@ -350,7 +351,7 @@ def _grey_coeffs(r, g, b) -> mi.Array3f:
 
     At white only lowering is possible, and there the table is no guide: within the last
     cell next to white its interpolated coefficients stay saturated (the local slope is
-    2% of the slope across the cell). White's derivative is the secant over that cell
+    2% of the slope across the cell). White's derivative is the secant across that cell
     (:func:`_white_derivative_np`), so that an optimisation that starts at 1 moves."""
     v = dr.detach(b)
     c2 = dr.clip((v - 0.5) * dr.rsqrt(dr.maximum(v * (1.0 - v), 1e-30)), -_GREY_LIMIT, _GREY_LIMIT)
