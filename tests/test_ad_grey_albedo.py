@@ -170,3 +170,21 @@ def test_black_emission_has_a_derivative():
     fwd = forward_image(scene, params, key, t, spp=64).mean()
     fd = fd_image(scene, params, key, t, 1.0, 64, seed=5, side=1).mean()
     assert fwd > 0 and abs(fwd - fd) < 0.05 * fd, (fwd, fd)
+
+
+def test_white_derivative_table_can_be_made_inside_a_kernel():
+    """White's derivative table is NumPy only: it may first be needed while a kernel is
+    traced or recorded (made with Dr.Jit lookups it failed inside a symbolic loop:
+    'Variable ... remains dirty')."""
+    S._white_derivative_np.cache_clear()
+
+    @dr.syntax
+    def loop(n):
+        i = mi.UInt32(0)
+        while i < n:
+            S._white_derivative_np()
+            i += 1
+        return i
+
+    assert np.array(loop(mi.UInt32(2, 3))).tolist() == [2, 3]
+    assert S._white_derivative_np().shape == (3, 3)
