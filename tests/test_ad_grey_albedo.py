@@ -32,8 +32,8 @@ CASES = [
     ("dark grey", [0.05, 0.05, 0.05], 0.01, 0, 4),
     ("near grey", [0.5, 0.5, 0.52], 0.02, 0, 4),
     ("white", [1.0, 1.0, 1.0], WHITE_STEP, -1, 4),
-    # Black is exact for direct light (of any colour); light off the coloured walls sees
-    # how the darkest colours' spectra differ from a grey's change (docs/inverse.md).
+    # Black: direct light only; light off the coloured walls sees how the darkest
+    # colours' spectra differ from a grey's change (docs/inverse.md: 28% at max_depth 4).
     ("black", [0.0, 0.0, 0.0], WHITE_STEP, 1, 2),
 ]
 
