@@ -20,16 +20,19 @@ def _perturb(params, key, v0, tangent, eps):
     params.update()
 
 
-def fd_image(scene, params, key, tangent, eps, spp, seed=0, passes=1):
-    """Central finite difference of the image along ``tangent`` (same seeds for +-eps)."""
+def fd_image(scene, params, key, tangent, eps, spp, seed=0, passes=1, side=0):
+    """Finite difference of the image along ``tangent`` (same seeds at both ends):
+    central (``side`` 0), or one-sided from the current value forward (+1) or backward
+    (-1), for parameters on a bound of their range."""
     v0 = type(params[key])(params[key])
+    steps = {0: (1.0, -1.0), 1: (1.0, 0.0), -1: (0.0, -1.0)}[side]
     acc = 0.0
     for p in range(passes):
         imgs = []
-        for sign in (1.0, -1.0):
+        for sign in steps:
             _perturb(params, key, v0, tangent, sign * eps)
             imgs.append(np.asarray(pbr.render(scene, spp=spp, seed=seed + 7919 * p), np.float64))
-        acc = acc + (imgs[0] - imgs[1]) / (2.0 * eps)
+        acc = acc + (imgs[0] - imgs[1]) / ((steps[0] - steps[1]) * eps)
     _perturb(params, key, v0, tangent, 0.0)
     return acc / passes
 

@@ -39,8 +39,9 @@ def fake(monkeypatch, tmp_path):
         calls["load_file"] = (path, kw)
         return FakeScene(spp=kw.get("spp"))
 
-    def render(scene, spp=0, seed=0):
+    def render(scene, spp=0, seed=0, on_nonfinite="warn"):
         calls["render"] = dict(spp=spp, seed=seed)
+        calls["on_nonfinite"] = on_nonfinite
         return img
 
     for name, f in dict(set_backend=set_backend, cornell_box=cornell_box, load_dict=load_dict,
@@ -56,6 +57,7 @@ def test_builtin_cornell_defaults(fake, tmp_path, capsys):
     assert fake["backend"] == "auto"
     assert fake["load_dict"]["marker"] == "cornell"
     assert fake["render"] == dict(spp=16, seed=3)
+    assert fake["on_nonfinite"] == "warn"
     np.testing.assert_array_equal(read_image(tmp_path / "out" / "cornell.exr"), fake["img"])
     assert (tmp_path / "pics" / "c.png").is_file()
     out = capsys.readouterr().out.strip()
@@ -144,13 +146,13 @@ def test_bad_output_extension_fails_before_render(fake, capsys):
 def test_nonfinite_image_is_an_error(fake, monkeypatch, capsys):
     bad = np.zeros((2, 2, 3), np.float32)
     bad[0, 0, 0] = np.nan
-    monkeypatch.setattr(pbr, "render", lambda scene, spp=0, seed=0: bad, raising=False)
+    monkeypatch.setattr(pbr, "render", lambda scene, spp=0, seed=0, **kw: bad, raising=False)
     assert cli.main(["render"]) == 2
     assert "1 non-finite" in capsys.readouterr().err
 
 
 def test_render_bugs_keep_their_traceback(fake, monkeypatch):
-    def render(scene, spp=0, seed=0):
+    def render(scene, spp=0, seed=0, **kw):
         raise ValueError("internal bug")
 
     monkeypatch.setattr(pbr, "render", render, raising=False)

@@ -148,7 +148,7 @@ def test_textured_transmittance():
 @pytest.mark.parametrize("bad, match", [
     ({"reflectence": 0.3}, r"scene\.bsdf\.reflectence: unknown parameter"),
     ({"scale": -1.0}, r"scene\.bsdf\.scale: must be >= 0"),
-    ({"transmittance": {"type": "rgb", "value": [1.5, 0, 0]}}, r"scene\.bsdf\.transmittance\.value: RGB reflectance"),
+    ({"transmittance": {"type": "rgb", "value": [1.5, 0, 0]}}, r"scene\.bsdf\.transmittance\.value: must be in \[0, 1\]"),
     ({"transmittance": {"type": "nosuch"}}, r"scene\.bsdf\.transmittance: unsupported texture"),
 ])
 def test_errors_name_the_key(bad, match):

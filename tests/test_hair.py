@@ -328,8 +328,8 @@ def test_mixed_instances_in_one_family():
 @pytest.mark.parametrize("d, key, text", [
     ({"type": "hair", "sigma_a": 0.5, "eumelanin": 0.3}, "bsdf.eumelanin", "not both"),
     ({"type": "hair", "reflectance": 0.5, "sigma_a": 0.3}, "bsdf.reflectance", "not both"),
-    ({"type": "hair", "longitudinal_roughness": 1.5}, "bsdf.longitudinal_roughness", "<= 1"),
-    ({"type": "hair", "azimuthal_roughness": -0.1}, "bsdf.azimuthal_roughness", ">= 0"),
+    ({"type": "hair", "longitudinal_roughness": 1.5}, "bsdf.longitudinal_roughness", "in [0, 1]"),
+    ({"type": "hair", "azimuthal_roughness": -0.1}, "bsdf.azimuthal_roughness", "in [0, 1]"),
     ({"type": "hair", "scale": 2.0}, "bsdf.scale", "needs it"),
     ({"type": "hair", "int_ior": 1.0, "ext_ior": 1.33}, "bsdf.int_ior", "int_ior > ext_ior"),
     ({"type": "hair", "eumelanin": -1.0}, "bsdf.eumelanin", ">= 0"),

@@ -170,7 +170,7 @@ def test_gradients_reach_the_leaves():
 @pytest.mark.parametrize("tex, match", [
     ({"type": "mix", "tex1": 0.2, "amout": 0.3}, r"scene\.m\.bsdf\.reflectance\.amout: unknown parameter 'amout'"),
     ({"type": "scale", "tex": {"type": "rgb", "value": [2, 0, 0]}},
-     r"scene\.m\.bsdf\.reflectance\.tex\.value: RGB reflectance must lie in \[0, 1\]"),
+     r"scene\.m\.bsdf\.reflectance\.tex\.value: must be in \[0, 1\] \(an albedo\)"),
     ({"type": "mix", "tex2": {"type": "scale", "tex": {"type": "bogus"}}},
      r"scene\.m\.bsdf\.reflectance\.tex2\.tex: unsupported texture/spectrum type 'bogus'"),
     ({"type": "scale", "scale": "x"}, r"scene\.m\.bsdf\.reflectance\.scale: expected a float or a texture"),

@@ -58,6 +58,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Dr.Jit backend (default auto: CUDA if usable, else LLVM)")
     r.add_argument("--tonemap", choices=TONEMAPS, default="clamp",
                    help="tone mapping for PNG output (default clamp)")
+    r.add_argument("--on-nonfinite", choices=("warn", "raise", "ignore"), default="warn",
+                   help="samples that are NaN or infinite count as 0: warn with their number "
+                        "(default), fail (exit status 2) or ignore them")
     r.add_argument("-D", dest="defines", action="append", type=_define, default=[],
                    metavar="NAME=VALUE",
                    help="scene parameter override passed to load_file (repeatable); "
@@ -115,7 +118,11 @@ def _render(args) -> int:
     t0 = time.perf_counter()
     # np.asarray forces evaluation of Dr.Jit's lazy result, so the time includes
     # kernel compilation and execution.
-    img = np.asarray(pbr.render(scene, spp=args.spp, seed=args.seed), dtype=np.float32)
+    try:
+        img = np.asarray(pbr.render(scene, spp=args.spp, seed=args.seed, on_nonfinite=args.on_nonfinite),
+                         dtype=np.float32)
+    except FloatingPointError as e:     # --on-nonfinite raise
+        raise UsageError(str(e)) from e
     elapsed = time.perf_counter() - t0
 
     written = []

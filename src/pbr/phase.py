@@ -11,6 +11,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from .plugins.props import HG_ASYMMETRY
 from .plugins.registry import Registry
 
 # |g| close to 1 makes the lobe a numerical spike: clamp as pbrt-v4 does.
@@ -88,7 +89,7 @@ def _henyey_greenstein(props):
     g     float  0.8      mean cosine, in [-1, 1] (clamped to +-G_MAX)
     ====  =====  =======  ============================================
     """
-    return HG, props.float("g", 0.8, min=-1.0, max=1.0)
+    return HG, props.float("g", 0.8, valid=HG_ASYMMETRY)
 
 
 @PHASE_TYPES.register("rayleigh")

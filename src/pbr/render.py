@@ -6,6 +6,7 @@ sensor loaded on its own (``pbr.load_dict`` of a sensor dict). Without gradients
 the integrator's primal passes. When any scene parameter has gradients enabled, the image is produced by a
 ``dr.CustomOp`` whose backward (forward) derivative runs the integrator's PRB adjoint
 passes with seed ``seed_grad`` and ``spp_grad`` samples, decorrelated from the primal.
+Samples that are not finite are counted and reported (``on_nonfinite``).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numbers
 import drjit as dr
 
 from . import backend, dispatch
+from .integrators.base import NonFinite
 from .samplers import seed_array
 from .scene.objects import as_integrator
 from .scene.params import SceneParameters, tables_as_leaves, traverse
@@ -70,24 +72,37 @@ def _seed(name, v):
 
 
 class _RenderOp(dr.CustomOp):
-    def eval(self, scene, params, sensor, integrator, seed, spp):
+    def eval(self, scene, params, sensor, integrator, seed, spp, on_nonfinite):
         self.scene, self.sensor, self.integrator = scene, sensor, integrator
-        self.seed, self.spp = seed, spp
+        self.seed, self.spp, self.on_nonfinite = seed, spp, on_nonfinite
+        # The primal pass's count is read after a derivative pass, not here: reading it
+        # would wait for the image while Python could trace the adjoint pass.
+        self.primal = integrator.nonfinite
         with dr.suspend_grad(), sensor_index(scene, sensor) as i:
             return integrator.render(scene, sensor=i, seed=seed[0], spp=spp[0])
 
     def forward(self):
         # The rendering loop's forward derivative starts from the tables' tangents, and
         # crosses family dispatch as per-lane selects (see pbr.dispatch).
+        counter = self.integrator.nonfinite = NonFinite(self.on_nonfinite)
         with backend.pbr_variant(), sensor_index(self.scene, self.sensor) as i, \
                 tables_as_leaves(self.scene, self.grad_in("params")), dispatch.by_lane():
             img = self.integrator.render_forward(self.scene, sensor=i, seed=self.seed[1], spp=self.spp[1])
         self.set_grad_out(img)
+        self._report(counter, "pbr.render (forward derivative)")
 
     def backward(self):
+        counter = self.integrator.nonfinite = NonFinite(self.on_nonfinite)
         with backend.pbr_variant(), sensor_index(self.scene, self.sensor) as i:
             self.integrator.render_backward(self.scene, self.grad_out(), sensor=i, seed=self.seed[1],
                                             spp=self.spp[1])
+        self._report(counter, "pbr.render (adjoint pass)")
+
+    def _report(self, counter, what):
+        if self.primal is not None:
+            primal, self.primal = self.primal, None
+            primal.report()
+        counter.report(what)
 
     def name(self):
         return "pbr.render"
@@ -95,24 +110,32 @@ class _RenderOp(dr.CustomOp):
 
 @backend.uses_pbr_variant
 def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, spp=0, spp_grad=0,
-           progress=None):
+           progress=None, on_nonfinite="warn"):
     """Render ``scene`` from sensor ``sensor``; returns ``mi.TensorXf`` (H, W, 3), linear
     sRGB (``np.asarray`` gives float32). ``spp=0`` uses the sensor's sampler count.
     ``integrator``: None (the scene's), an integrator dict, or ``pbr.load_dict`` of one.
     ``sensor``: an index, an entry of ``scene.sensors()``, or ``pbr.load_dict`` of a
     sensor dict. Seeds are Python ints or width-1 ``mi.UInt32`` (pass the latter, e.g.
     ``dr.opaque(mi.UInt32, i)``, to a function under ``dr.freeze``: an int is baked into
-    its recording)."""
+    its recording). Samples that are NaN or infinite count as 0 in the image;
+    ``on_nonfinite`` says what to do about them after the render: 'warn' (a
+    ``RuntimeWarning`` with their number), 'raise' (``FloatingPointError``) or 'ignore'
+    (not checked inside ``dr.freeze``). With gradients enabled the count is read after
+    the derivative pass (``dr.backward``, ``dr.forward``), so that the render does not
+    wait for its image."""
     integrator = scene.integrator if integrator is None else as_integrator(integrator)
     spp, spp_grad = _count("spp", spp), _count("spp_grad", spp_grad)
     seed, seed_grad = _seed("seed", seed), _seed("seed_grad", seed_grad)
+    counter = integrator.nonfinite = NonFinite(on_nonfinite)
     if any(s.parameters_grad_enabled() for s in scene.mi_scene.shapes()):
         raise NotImplementedError("render: a shape's geometry has gradients enabled, but pbr does not "
                                   "differentiate geometry (no edge sampling or reparameterisation): disable "
                                   "them (dr.disable_grad)")
     if not scene.requires_grad():
         with sensor_index(scene, sensor) as i:
-            return integrator.render(scene, sensor=i, seed=seed, spp=spp, progress=progress)
+            img = integrator.render(scene, sensor=i, seed=seed, spp=spp, progress=progress)
+        counter.report()
+        return img
     p = params if params is not None else traverse(scene)
     values = (p.differentiable_values() if isinstance(p, SceneParameters)
               else {k: v for k, v in p.items() if dr.grad_enabled(v)})
@@ -126,4 +149,5 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
             seed = seed_array(seed)
             seed_grad = dr.select(seed == 0, 0x51ED270B, seed + 0x9E3779B9)
     spp_grad = spp_grad or spp
-    return dr.custom(_RenderOp, scene, values, sensor, integrator, (seed, seed_grad), (spp, spp_grad))
+    return dr.custom(_RenderOp, scene, values, sensor, integrator, (seed, seed_grad), (spp, spp_grad),
+                     on_nonfinite)

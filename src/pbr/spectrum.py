@@ -229,28 +229,58 @@ def luminance_rgb(rgb):
 # ---------------------------------------------------------------- RGB upsampling
 
 _GREY_LIMIT = 8192.0
+# The wavelength at which a table derivative is carried over to a grey's coefficients.
+_LAMBDA_REF = 555.0
+# Black has no table derivative (the table divides by the brightest channel): it takes
+# the one-sided derivative of this grey, where they have converged (d/dr of an albedo's
+# image under D65: 0.989 at 1e-3, 0.988 at 1e-2).
+_BLACK_PROBE = 1e-3
 
 
-def rgb_to_coeffs(rgb: mi.Color3f) -> mi.Array3f:
-    """Sigmoid-polynomial coefficients for sRGB albedos in [0, 1] (vectorised and
-    differentiable in ``rgb``: a trilinear lookup in the Jakob-Hanika table)."""
-    t = _Tables.get()
-    res = t["res"]
-    rgb = dr.clip(mi.Color3f(rgb), 0.0, 1.0)
-    r, g, b = rgb[0], rgb[1], rgb[2]
-    # Dominant channel i (ties resolved toward the later channel, as the table expects).
+def clamp_keep_grad(x, lo=None, hi=None):
+    """``x`` clamped to [lo, hi] (either bound may be None) with the derivative of ``x``
+    itself. For clamps that are numerical safety, not part of the model: a roughness
+    floor, the RGB upsampling's [0, 1]. Dr.Jit's ``dr.maximum(x, lo)`` has derivative 0
+    for ``x <= lo``, so a parameter at or below such a bound (an albedo of 0, a roughness
+    of 0) got no gradient at all; here it gets the derivative at the bound, the
+    one-sided derivative an optimisation starting there needs."""
+    c = x
+    if lo is not None:
+        c = dr.maximum(c, lo)
+    if hi is not None:
+        c = dr.minimum(c, hi)
+    return dr.replace_grad(c, x) if dr.grad_enabled(x) else c
+
+
+def _dsigmoid(x):
+    """Derivative of the sigmoid ``s(x) = 1/2 + x / (2 sqrt(1 + x^2))``: ``(1 + x^2)^(-3/2) / 2``."""
+    r = dr.rsqrt(dr.fma(x, x, 1.0))
+    return 0.5 * r * r * r
+
+
+def _dominant(r, g, b):
+    """Index of the brightest channel (ties toward the later channel, as the table
+    expects) and its value (selected, so that a tie's derivative follows the index)."""
     i = dr.select(g >= r, 1, 0)
     vi = dr.select(g >= r, g, r)
     i = mi.UInt32(dr.select(b >= vi, 2, i))
-    z = dr.maximum(dr.maximum(r, g), b)
+    return i, dr.select(i == 0, r, dr.select(i == 1, g, b))
+
+
+def _table_lookup(r, g, b, i, z) -> mi.Array3f:
+    """Trilinear lookup in the Jakob-Hanika table of dominant channel ``i`` (value ``z``):
+    differentiable in the channels through the cell weights."""
+    t = _Tables.get()
+    res = t["res"]
     a = dr.select(i == 0, g, dr.select(i == 1, b, r))  # channel (i+1) % 3
     c = dr.select(i == 0, b, dr.select(i == 1, r, g))  # channel (i+2) % 3
     sc = (res - 1) / dr.maximum(z, 1e-30)
     x, y = a * sc, c * sc
-    xi = dr.minimum(mi.UInt32(x), res - 2)
-    yi = dr.minimum(mi.UInt32(y), res - 2)
+    xi = dr.minimum(mi.UInt32(dr.detach(x)), res - 2)
+    yi = dr.minimum(mi.UInt32(dr.detach(y)), res - 2)
     scale = t["scale"]
-    zi = dr.binary_search(0, res - 2, lambda k: dr.gather(mi.Float, scale, k + 1) <= z)
+    zd = dr.detach(z)
+    zi = dr.binary_search(0, res - 2, lambda k: dr.gather(mi.Float, scale, k + 1) <= zd)
     zi = dr.minimum(zi, res - 2)
     s0 = dr.gather(mi.Float, scale, zi)
     s1 = dr.gather(mi.Float, scale, zi + 1)
@@ -267,25 +297,134 @@ def rgb_to_coeffs(rgb: mi.Color3f) -> mi.Array3f:
             z0 * (y0 * (x0 * tap(0) + x1 * tap(dx)) + y1 * (x0 * tap(dy) + x1 * tap(dy + dx)))
             + z1 * (y0 * (x0 * tap(dz) + x1 * tap(dz + dx))
                     + y1 * (x0 * tap(dz + dy) + x1 * tap(dz + dy + dx))))
-    coeffs = mi.Array3f(out)
-    # Greys have an exact flat solution (the table lookup would divide by zero for black).
-    grey = (r == g) & (g == b)
-    c2 = dr.clip((r - 0.5) * dr.rsqrt(dr.maximum(r * (1.0 - r), 1e-30)), -_GREY_LIMIT, _GREY_LIMIT)
-    return dr.select(grey, mi.Array3f(0.0, 0.0, c2), coeffs)
+    return mi.Array3f(out)
+
+
+@lru_cache(maxsize=None)
+def _white_derivative_np() -> np.ndarray:
+    """Per channel (columns), the quadratic ``q`` (rows: its l^2, l, 1 coefficients)
+    standing for the one-sided derivative of the albedo spectrum at white (lowering the
+    channel): the secant to the table's neighbouring node, one cell (1 / (res - 1)) below
+    white in that channel, as a quadratic spectrum with the same D65 tristimulus values
+    (a grey's coefficients can only move by a quadratic in l). NumPy only, so that it can
+    be computed anywhere (inside kernels being traced, inside ``dr.freeze``)."""
+    scale, data = _rgb2spec_np()
+    n = len(scale) - 1
+    table = data.reshape(3, n + 1, n + 1, n + 1, 3)     # [brightest channel, z, y, x, coefficient]
+    # Lowering r or g (blue brightest by the tie rule: x = r, y = g) or b (green brightest: x = b).
+    c = np.array([table[2, n, n, n - 1], table[2, n, n - 1, n], table[1, n, n, n - 1]], np.float64)
+    lam = np.arange(LAMBDA_MIN, LAMBDA_MAX + 1.0)
+    xyz, d65 = cie_tables_np()
+    grid = LAMBDA_MIN + _CIE_STEP * np.arange(_CIE_SAMPLES)
+    w = np.stack([np.interp(lam, grid, xyz[:, k]) * np.interp(lam, grid, d65) for k in range(3)])
+    V = np.stack([lam * lam, lam, np.ones_like(lam)], 1)
+    x = c @ V.T
+    S = 0.5 + x / (2.0 * np.sqrt(1.0 + x * x))                         # (3 channels, n_lambda)
+    return np.linalg.solve(w @ V, w @ ((1.0 - S) * n).T)                 # white is S = 1
+
+
+def _grey_coeffs(r, g, b) -> mi.Array3f:
+    """Coefficients of a grey ``r = g = b = v``: the exact flat solution
+    ``(0, 0, (v - 1/2) / sqrt(v (1 - v)))`` (clamped at +-8192), with a derivative.
+
+    A grey is where the three dominant-channel tables meet, and its value is not the
+    tables' (they differ from the flat solution by up to 3e-4 near white), so the
+    derivative is assembled from one-sided ones:
+
+    * lowering channel ``k`` moves into a table where ``k`` is not the brightest: that
+      table's derivative ``J_k`` along its in-cell coordinate;
+    * raising it makes ``k`` the brightest; that side is taken as the exact grey
+      derivative ``G`` (a flat unit spectrum) minus the other two channels' ``J``, since
+      raising all three is exactly the flat direction.
+
+    Channel ``k``'s derivative is the mean of the two sides (what central differences
+    measure): for a tangent ``d``, ``G sum(d) / 2 + sum_k J_k (d_k - sum(d) / 2)``. The
+    table's derivative is carried to the grey's coefficients by the ratio of the sigmoid's
+    slopes at :data:`_LAMBDA_REF` (exact where the table's polynomial is flat in
+    wavelength: within 1% up to v = 0.99). Black has no table derivative (the table
+    divides by the brightest channel): it takes the derivative of the grey
+    :data:`_BLACK_PROBE`, the limit of the greys' (continuous at 0). Only raising is
+    possible there, and the spectra of the darkest colours are narrower than any
+    quadratic change of a grey's polynomial: they have the same colour under the colour
+    space's white (D65), and the Cornell box's direct light barely tells them apart, but
+    light off its coloured walls does (at max_depth 4, d mean(R) / d r at black: 0.052 vs
+    one-sided differences 0.071).
+
+    At white only lowering is possible, and there the table is no guide: within the last
+    cell next to white its interpolated coefficients stay saturated (the local slope is
+    2% of the slope across the cell). White's derivative is the secant across that cell
+    (:func:`_white_derivative_np`), so that an optimisation that starts at 1 moves."""
+    v = dr.detach(b)
+    c2 = dr.clip((v - 0.5) * dr.rsqrt(dr.maximum(v * (1.0 - v), 1e-30)), -_GREY_LIMIT, _GREY_LIMIT)
+    if not dr.grad_enabled((r, g, b)):
+        return mi.Array3f(0.0, 0.0, c2)
+    half = 0.5 * (r + g + b)
+    probe = dr.maximum(v, _BLACK_PROBE)
+
+    def tangent(x):
+        """The probe's value carrying the derivative of ``x - sum / 2``."""
+        d = x - half
+        return probe + (d - dr.detach(d))
+
+    # J_r and J_g from the blue table (r, g below b); J_b from the red table (b below r).
+    j_rg = _table_lookup(tangent(r), tangent(g), probe, mi.UInt32(2), probe)
+    j_b = _table_lookup(probe, probe, tangent(b), mi.UInt32(0), probe)
+    table = dr.detach(j_rg)
+    x = dr.fma(dr.fma(table[0], _LAMBDA_REF, table[1]), _LAMBDA_REF, table[2])
+    dS = _dsigmoid(x) * ((j_rg - table) + (j_b - dr.detach(j_b)))
+    dS[2] += half - dr.detach(half)
+    # White: the secants, as a quadratic spectrum per channel.
+    d = mi.Vector3f(r - dr.detach(r), g - dr.detach(g), b - dr.detach(b))
+    dS = dr.select(v >= 1.0, mi.Matrix3f(_white_derivative_np().tolist()) @ d, dS)
+    # d S = s'(c2) d(poly): the flat solution's coefficients move by d S / s'(c2).
+    return mi.Array3f(0.0, 0.0, c2) + dS / _dsigmoid(c2)
+
+
+def rgb_to_coeffs(rgb: mi.Color3f) -> mi.Array3f:
+    """Sigmoid-polynomial coefficients for sRGB albedos in [0, 1] (vectorised and
+    differentiable in ``rgb``: a trilinear lookup in the Jakob-Hanika table; greys, where
+    the three tables meet, have the exact flat solution and the derivative of
+    :func:`_grey_coeffs`). The clip to [0, 1] keeps the derivative (:func:`clamp_keep_grad`),
+    so an optimisation may start at black or white (values outside [0, 1] are rejected
+    where parameters are validated)."""
+    rgb = mi.Color3f(rgb)
+    r, g, b = (clamp_keep_grad(rgb[k], 0.0, 1.0) for k in range(3))
+    i, z = _dominant(r, g, b)
+    coeffs = _table_lookup(r, g, b, i, z)
+    return dr.select((r == g) & (g == b), _grey_coeffs(r, g, b), coeffs)
 
 
 def sigmoid_polynomial(coeffs: mi.Array3f, lam: mi.Spectrum) -> mi.Spectrum:
-    """Evaluate the sigmoid polynomial (values in [0, 1]) at each wavelength."""
+    """Evaluate the sigmoid polynomial (values in [0, 1]) at each wavelength.
+
+    For negative ``x`` the sigmoid is evaluated as ``r^2 / (2 (1 - x r))``, ``r = 1 /
+    sqrt(1 + x^2)`` (the same function without the cancellation of ``1/2 + x r / 2``):
+    a black albedo (x = -8192) is 3.7e-9, not float32 rounding noise or 0, so that paths
+    continue past it and its derivative reaches the light beyond (a zero throughput
+    ends a path, and Path Replay Backpropagation divides by the BSDF value). Its
+    derivative is the closed form ``r^3 / 2``: Dr.Jit's derivative of the expression
+    cancels catastrophically where ``|x|`` is large (dark and bright colours)."""
     x = dr.fma(dr.fma(coeffs[0], lam, coeffs[1]), lam, coeffs[2])
-    return dr.maximum(dr.fma(0.5 * x, dr.rsqrt(dr.fma(x, x, 1.0)), 0.5), 0.0)
+    r = dr.rsqrt(dr.fma(x, x, 1.0))
+    y = type(x)(dr.select(x < 0, 0.5 * r * r / dr.fma(-x, r, 1.0), dr.fma(0.5 * x, r, 0.5)))
+    if dr.grad_enabled(x):
+        xd = dr.detach(x)
+        y = dr.detach(y) + _dsigmoid(xd) * (x - xd)
+    return y
 
 
 def rgb_unbounded(rgb: mi.Color3f) -> tuple[mi.Array3f, mi.Float]:
-    """(coefficients, scale) of the unbounded form: scale * S(l) reproduces ``rgb``."""
+    """(coefficients, scale) of the unbounded form: scale * S(l) reproduces ``rgb``.
+
+    At black (scale 0) the spectrum ``scale * S`` has a derivative only through the
+    scale: it is taken as that of ``2 mean(rgb)`` times the flat albedo 1/2, so that
+    raising all channels from 0 has the exact (flat) derivative; a single channel's gets
+    a flat spectrum of a third of that (a colour needs a non-zero scale)."""
     rgb = mi.Color3f(rgb)
     m = dr.maximum(dr.maximum(rgb[0], rgb[1]), rgb[2])
-    scale = 2.0 * m
-    coeffs = rgb_to_coeffs(dr.select(scale > 0, rgb / dr.maximum(scale, 1e-30), 0.0))
+    black = (rgb[0] == 0) & (rgb[1] == 0) & (rgb[2] == 0)
+    scale = dr.select(black, (2.0 / 3.0) * (rgb[0] + rgb[1] + rgb[2]), 2.0 * m)
+    coeffs = rgb_to_coeffs(dr.select(black, 0.5, rgb / dr.maximum(2.0 * m, 1e-30)))
     return coeffs, scale
 
 

@@ -13,7 +13,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .. import dispatch
-from ..plugins.props import SceneError
+from ..plugins.props import UNIT, SceneError
 from ..spectrum import luminance_rgb
 from ..textures import load_spectrum
 from . import perturb
@@ -66,7 +66,7 @@ class BSDFSet:
         nested = [k for k, v in props.children() if k != wkey]
         if len(nested) != 2:
             raise props.error(None, f"{props.type} takes exactly two nested BSDFs, got {len(nested)}")
-        weight = load_spectrum(loader, props.raw(wkey, 0.5), props.key(wkey), emitter=False)
+        weight = load_spectrum(loader, props.raw(wkey, 0.5), props.key(wkey), emitter=False, valid=UNIT)
         ids = [loader.bsdf(props.raw(k), props.key(k)) for k in nested]
         props.finish()
         for i, k in zip(ids, nested):
@@ -113,7 +113,7 @@ class BSDFSet:
         nested = [k for k, v in props.children() if k != "opacity"]
         if len(nested) != 1:
             raise props.error(None, f"mask takes exactly one nested BSDF, got {len(nested)}")
-        opacity = load_spectrum(loader, props.raw("opacity", 0.5), props.key("opacity"), emitter=False)
+        opacity = load_spectrum(loader, props.raw("opacity", 0.5), props.key("opacity"), emitter=False, valid=UNIT)
         inner = loader.bsdf(props.raw(nested[0]), props.key(nested[0]))
         props.finish()
         fam, local, back, op = self.entries[inner]

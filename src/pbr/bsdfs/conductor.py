@@ -13,6 +13,7 @@ import os
 import drjit as dr
 import mitsuba as mi
 
+from ..plugins.props import NONNEGATIVE, ROUGHNESS
 from ..spectrum import read_spd
 from ..textures import add_tabulated, load_spectrum
 from .base import BSDF_TYPES, BSDFType, BSDFSample, REFLECTION, GLOSSY, SPECULAR
@@ -35,8 +36,9 @@ def _load_eta_k(loader, props):
     if has_ek:
         if props.has("material"):
             raise props.error("material", "give either 'material' or 'eta'/'k', not both")
-        eta = load_spectrum(loader, props.raw("eta", 0.0), props.key("eta"), emitter=False, unbounded=True)
-        k = load_spectrum(loader, props.raw("k", 1.0), props.key("k"), emitter=False, unbounded=True)
+        eta = load_spectrum(loader, props.raw("eta", 0.0), props.key("eta"), emitter=False, unbounded=True,
+                            valid=NONNEGATIVE)
+        k = load_spectrum(loader, props.raw("k", 1.0), props.key("k"), emitter=False, unbounded=True, valid=NONNEGATIVE)
         return eta, k
     if material == "none":
         return (load_spectrum(loader, 0.0, props.key("eta"), emitter=False),
@@ -123,10 +125,12 @@ class RoughConductor(Conductor):
         au = props.raw("alpha_u", props.raw("alpha", 0.1))
         av = props.raw("alpha_v", props.raw("alpha", 0.1) if not props.has("alpha_u") else au)
         anisotropic = props.has("alpha_u") or props.has("alpha_v")
-        au = load_spectrum(loader, au, props.key("alpha_u" if props.has("alpha_u") else "alpha"), emitter=False)
+        au = load_spectrum(loader, au, props.key("alpha_u" if props.has("alpha_u") else "alpha"), emitter=False,
+                           valid=ROUGHNESS)
         # Isotropic: one slot for both directions, so that the parameter <bsdf>.alpha
         # moves both (two slots under one key left alpha_v at its loaded value).
-        av = (load_spectrum(loader, av, props.key("alpha_v" if props.has("alpha_v") else "alpha"), emitter=False)
+        av = (load_spectrum(loader, av, props.key("alpha_v" if props.has("alpha_v") else "alpha"), emitter=False,
+                            valid=ROUGHNESS)
               if anisotropic else au)
         # Visible-normal sampling exists for GGX only (see Microfacet).
         visible = props.bool("sample_visible", True) and dist == GGX

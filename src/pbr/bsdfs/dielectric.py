@@ -15,8 +15,6 @@ evaluated in kernels of families where some instance sets them.
 
 from __future__ import annotations
 
-import numbers
-
 import drjit as dr
 import mitsuba as mi
 
@@ -25,6 +23,7 @@ import numpy as np
 from ..spectrum import LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, sellmeier_ior
 from ..textures import add_tabulated, load_spectrum
 from ..plugins.params import ParamOwner, param_table
+from ..plugins.props import IOR, ROUGHNESS
 from .base import BSDF_TYPES, BSDFSample, BSDFType, GLOSSY, REFLECTION, SPECULAR, TRANSMISSION
 from .fresnel import fresnel_dielectric, lookup_ior, reflect, reflect_about, refract, refract_about
 from .microfacet import BECKMANN, GGX, Microfacet, VariantTable
@@ -43,7 +42,7 @@ def _ior_spectrum(loader, props, name: str, default: str):
     if isinstance(v, dict):
         if v.get("type") != "spectrum":
             raise props.error(name, "a wavelength-dependent IOR must be a 'spectrum' (pairs or a file)")
-        return None, load_spectrum(loader, v, props.key(name), emitter=False, unbounded=True)
+        return None, load_spectrum(loader, v, props.key(name), emitter=False, unbounded=True, valid=IOR)
     return lookup_ior(props, name, default), None
 
 
@@ -57,9 +56,9 @@ def _eta(loader, props, rough: bool):
             raise props.error("int_ior", f"must differ from ext_ior for a rough interface (both are {ni})")
         return ni / ne, _NO_TEXTURE, _NO_TEXTURE
     if si is None:
-        si = load_spectrum(loader, ni, props.key("int_ior"), emitter=False)
+        si = load_spectrum(loader, ni, props.key("int_ior"), emitter=False, valid=IOR)
     if se is None:
-        se = load_spectrum(loader, ne, props.key("ext_ior"), emitter=False)
+        se = load_spectrum(loader, ne, props.key("ext_ior"), emitter=False, valid=IOR)
     return 1.0, si, se
 
 
@@ -159,7 +158,8 @@ class _Dielectric(BSDFType):
         inst["eta"], inst["int_slot"], inst["ext_slot"] = _eta(loader, props, self._rough)
         # A constant relative IOR is a scene parameter (Mitsuba's key ``<bsdf>.eta``);
         # dispersive IORs are textures, already parameters of their own.
-        inst["owner"] = ParamOwner(props.path, eta=mi.Float(inst["eta"])) if inst["int_slot"] == _NO_TEXTURE else None
+        inst["owner"] = (ParamOwner(props.path, valid={"eta": IOR}, eta=mi.Float(inst["eta"]))
+                         if inst["int_slot"] == _NO_TEXTURE else None)
         for name in ("specular_reflectance", "specular_transmittance"):
             inst[name] = (load_spectrum(loader, props.raw(name), props.key(name), emitter=False)
                           if props.has(name) else None)
@@ -333,10 +333,8 @@ class RoughDielectric(_Dielectric):
             names = ("alpha",)
         slots = []
         for k in names:
-            v = props.raw(k, 0.1)
-            if isinstance(v, numbers.Real) and not isinstance(v, bool) and v < 0:
-                raise props.error(k, f"roughness must be >= 0, got {v}")
-            slots.append(load_spectrum(loader, v, props.key(k), emitter=False, unbounded=True))
+            slots.append(load_spectrum(loader, props.raw(k, 0.1), props.key(k), emitter=False, unbounded=True,
+                                       valid=ROUGHNESS))
         inst["alpha"] = (slots[0], slots[-1])
         self._add_common(loader, props, inst)
         props.finish()

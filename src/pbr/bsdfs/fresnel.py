@@ -9,6 +9,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from ..plugins.props import IOR
+
 
 def fresnel_dielectric(cos_theta_i, eta):
     """Unpolarised reflectance of a dielectric interface.
@@ -115,7 +117,4 @@ def lookup_ior(props, name: str, default):
         if key not in IOR_TABLE:
             raise props.error(name, f"unknown IOR name {v!r}; known: {', '.join(IOR_TABLE)}")
         return IOR_TABLE[key]
-    ior = props.float(name, default)
-    if ior <= 0:
-        raise props.error(name, f"an index of refraction must be positive, got {ior}")
-    return ior
+    return props.float(name, default, valid=IOR)

@@ -6,12 +6,12 @@ model, its parameters and conventions: docs/materials.md.
 from __future__ import annotations
 
 import math
-import numbers
 
 import drjit as dr
 import mitsuba as mi
 
-from ..spectrum import rgb_to_coeffs, sigmoid_polynomial
+from ..plugins.props import NONNEGATIVE, Range
+from ..spectrum import clamp_keep_grad, rgb_to_coeffs, sigmoid_polynomial
 from ..textures import load_spectrum
 from .base import BSDF_TYPES, BSDFType, BSDFSample, REFLECTION, TRANSMISSION, GLOSSY
 from .fresnel import fresnel_dielectric, lookup_ior
@@ -198,10 +198,6 @@ def _select_p(p, values):
 
 # --------------------------------------------------------------------- the family
 
-def _is_number(v) -> bool:
-    return isinstance(v, numbers.Real) and not isinstance(v, bool)
-
-
 @BSDF_TYPES.register("hair")
 class Hair(BSDFType):
     """``hair``: Chiang et al.'s hair fibre (Mitsuba's ``hair``, pbrt-v4's ``HairBxDF``), for
@@ -228,12 +224,9 @@ class Hair(BSDFType):
     flags = REFLECTION | TRANSMISSION | GLOSSY
 
     def _float_texture(self, loader, props, name, default, lo=None, hi=None):
-        """A float parameter (a number, checked against [lo, hi], or a texture whose first
-        wavelength is used) as a texture slot."""
-        v = props.raw(name, default)
-        if _is_number(v):
-            props.float(name, default, min=lo, max=hi)
-        return load_spectrum(loader, v, props.key(name), emitter=False)
+        """A float parameter (a number or a texture whose first wavelength is used) in
+        [lo, hi], as a texture slot."""
+        return load_spectrum(loader, props.raw(name, default), props.key(name), emitter=False, valid=Range(lo, hi))
 
     def add(self, loader, props) -> int:
         inst = {}
@@ -255,7 +248,7 @@ class Hair(BSDFType):
         if props.has("sigma_a"):
             inst["mode"] = SIGMA_A
             inst["sigma"] = load_spectrum(loader, props.raw("sigma_a"), props.key("sigma_a"), emitter=False,
-                                          unbounded=True)
+                                          unbounded=True, valid=NONNEGATIVE)
         elif props.has("reflectance"):
             inst["mode"] = REFLECTANCE
             inst["sigma"] = load_spectrum(loader, props.raw("reflectance"), props.key("reflectance"), emitter=False)
@@ -289,8 +282,9 @@ class Hair(BSDFType):
             return tex.eval(dr.gather(mi.UInt32, table, idx, on), uv, lam, on, illuminant=False)
 
         fb = _Fibre()
-        beta_m = dr.clip(ev(self.beta_m)[0], _BETA_MIN, 1.0)
-        beta_n = dr.clip(ev(self.beta_n)[0], _BETA_MIN, 1.0)
+        # Numerical clamps of checked values: the derivative at a bound passes.
+        beta_m = clamp_keep_grad(ev(self.beta_m)[0], _BETA_MIN, 1.0)
+        beta_n = clamp_keep_grad(ev(self.beta_n)[0], _BETA_MIN, 1.0)
         fb.v = longitudinal_variances(beta_m)
         fb.s = logistic_scale(beta_n)
         sin_a = dr.sin(ev(self.alpha)[0] * (dr.pi / 180.0))
@@ -305,13 +299,13 @@ class Hair(BSDFType):
         sigma_a = mi.Spectrum(0.0)
         if PIGMENT in self.modes:
             on = active if mode is None else active & (mode == PIGMENT)
-            ce = dr.maximum(ev(self.eu, on)[0], 0.0)
-            cp = dr.maximum(ev(self.ph, on)[0], 0.0)
+            ce = clamp_keep_grad(ev(self.eu, on)[0], 0.0)
+            cp = clamp_keep_grad(ev(self.ph, on)[0], 0.0)
             se, sp = (sigmoid_polynomial(mi.Array3f(*c), lam) for c in self.pigment_coeffs)
             sigma_a = dr.select(on, ce * se + cp * sp, sigma_a)
         if SIGMA_A in self.modes:
             on = active if mode is None else active & (mode == SIGMA_A)
-            sig = dr.maximum(ev(self.sigma, on) * dr.gather(mi.Float, self.scale, idx, on), 0.0)
+            sig = clamp_keep_grad(ev(self.sigma, on) * dr.gather(mi.Float, self.scale, idx, on), 0.0)
             sigma_a = dr.select(on, sig, sigma_a)
         if REFLECTANCE in self.modes:
             on = active if mode is None else active & (mode == REFLECTANCE)

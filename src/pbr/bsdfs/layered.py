@@ -15,8 +15,9 @@ import mitsuba as mi
 from .. import dispatch
 from ..phase import hg, hg_pdf, hg_sample
 from ..plugins.params import ParamOwner, param_table
+from ..plugins.props import HG_ASYMMETRY, IOR, NONNEGATIVE, ROUGHNESS
 from ..sampling import cosine_hemisphere_pdf, power_heuristic, square_to_cosine_hemisphere
-from ..spectrum import read_spd
+from ..spectrum import clamp_keep_grad, read_spd
 from ..textures import add_tabulated, load_spectrum
 from .base import BSDF_TYPES, BSDFSample, BSDFType, DIFFUSE, GLOSSY, REFLECTION, SPECULAR, TRANSMISSION
 from .conductor import _IOR_DIR   # Mitsuba's measured metal data
@@ -312,11 +313,9 @@ class _Layered(BSDFType):
         keys = [prefix + n if props.has(prefix + n) else prefix + "roughness" for n in ("uroughness", "vroughness")]
         slots = []
         for v, k in zip(vals, keys):
-            if _number(v) and v < 0:
-                raise props.error(k, f"roughness must be >= 0, got {v}")
             # Both axes from ``roughness``: one slot, so that the parameter moves both.
             slots.append(slots[0] if slots and k == keys[0] else
-                         load_spectrum(loader, v, props.key(k), emitter=False, unbounded=True))
+                         load_spectrum(loader, v, props.key(k), emitter=False, unbounded=True, valid=ROUGHNESS))
         if all(_number(v) for v in vals):
             alpha = max((float(v) ** 0.5 if remap else float(v)) for v in vals)
             kind = SMOOTH if alpha < _SMOOTH_ALPHA else ROUGH
@@ -335,21 +334,21 @@ class _Layered(BSDFType):
         inst["eta"], inst["eta_slot"] = (1.0 if eta is None else eta), (_NONE if slot is None else slot)
         # A constant IOR is a scene parameter (``<bsdf>.eta``, ``<bsdf>.interface.eta``);
         # a spectral one is a texture, a parameter of its own.
-        inst["owner"] = ParamOwner(props.path, **{p + "eta": mi.Float(inst["eta"])}) if slot is None else None
+        inst["owner"] = (ParamOwner(props.path, valid={p + "eta": IOR}, **{p + "eta": mi.Float(inst["eta"])})
+                         if slot is None else None)
         (inst["top_u"], inst["top_v"]), kind = self._roughness(loader, props, p, remap)
         if slot is not None:
             kind = MIXED       # a wavelength-dependent IOR may be 1
         elif eta == 1.0:
             kind = SMOOTH
         inst["top_kind"] = kind
-        t = props.raw("thickness", 0.01)
-        if _number(t) and t < 0:
-            raise props.error("thickness", f"must be >= 0, got {t}")
-        inst["thickness"] = load_spectrum(loader, t, props.key("thickness"), emitter=False, unbounded=True)
+        inst["thickness"] = load_spectrum(loader, props.raw("thickness", 0.01), props.key("thickness"), emitter=False,
+                                          unbounded=True, valid=NONNEGATIVE)
         a = props.raw("albedo", 0.0)
         inst["medium"] = not (_number(a) and a == 0)
         inst["albedo"] = load_spectrum(loader, a, props.key("albedo"), emitter=False)
-        inst["g"] = load_spectrum(loader, props.raw("g", 0.0), props.key("g"), emitter=False, unbounded=True)
+        inst["g"] = load_spectrum(loader, props.raw("g", 0.0), props.key("g"), emitter=False, unbounded=True,
+                                  valid=HG_ASYMMETRY)
         inst["maxdepth"] = props.int("maxdepth", 10, min=1)
         inst["nsamples"] = props.int("nsamples", 1, min=1)
         return inst
@@ -399,10 +398,11 @@ class _Layered(BSDFType):
             eta = dr.select(disp, dr.select(e == 0, 1.0, e), eta)
             terminate = disp
         top = _Top(eta, *self._alpha(ev, idx, self.top_u, self.top_v, active), self.top_kind)
-        thick = dr.maximum(ev(self.thickness)[0], _FLT_MIN)
+        # Numerical clamps of checked values: the derivative at a bound passes.
+        thick = clamp_keep_grad(ev(self.thickness)[0], _FLT_MIN)
         if self.medium:
-            albedo = dr.clip(ev(self.albedo), 0.0, 1.0)
-            g = dr.clip(ev(self.g)[0], -1.0, 1.0)
+            albedo = clamp_keep_grad(ev(self.albedo), 0.0, 1.0)
+            g = clamp_keep_grad(ev(self.g)[0], -1.0, 1.0)
             medium = dr.any(albedo > 0)
         else:
             albedo, g, medium = mi.Spectrum(0.0), mi.Float(0.0), mi.Bool(False)
@@ -679,7 +679,7 @@ class CoatedDiffuse(_Layered):
         self.reflectance = mi.UInt32([i["reflectance"] for i in self.instances])
 
     def _base(self, ev, idx, eta, active):
-        return _DiffuseBase(dr.clip(ev(self.reflectance), 0.0, 1.0))
+        return _DiffuseBase(clamp_keep_grad(ev(self.reflectance), 0.0, 1.0))
 
 
 def _metal(loader, name: str, comp: str, path: str) -> int:
@@ -722,7 +722,7 @@ class CoatedConductor(_Layered):
             if not os.path.exists(os.path.join(_IOR_DIR, f"{metal}.{comp}.spd")):
                 raise props.error(name, f"unknown conductor spectrum {v!r} (e.g. 'metal-Cu-{comp}')")
             return _metal(loader, metal, comp, props.key(name))
-        return load_spectrum(loader, v, props.key(name), emitter=False, unbounded=True)
+        return load_spectrum(loader, v, props.key(name), emitter=False, unbounded=True, valid=NONNEGATIVE)
 
     def add(self, loader, props) -> int:
         inst = self._add_common(loader, props)

@@ -12,6 +12,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..sampling import square_to_uniform_disk_concentric
+from ..spectrum import clamp_keep_grad
 
 GGX, BECKMANN = "ggx", "beckmann"
 
@@ -20,8 +21,10 @@ class Microfacet:
     def __init__(self, kind: str, alpha_u, alpha_v, sample_visible: bool = True):
         self.kind = kind
         # Very small roughness underflows (alpha^4 in D): clamp as pbrt-v4 and Mitsuba do.
-        self.au = dr.maximum(alpha_u, 1e-4)
-        self.av = dr.maximum(alpha_v, 1e-4)
+        # Below the clamp the derivative is the one at 1e-4 (d/d alpha was 0 there, while
+        # the image does change as alpha rises through it).
+        self.au = clamp_keep_grad(alpha_u, 1e-4)
+        self.av = clamp_keep_grad(alpha_v, 1e-4)
         # Visible-normal sampling is implemented for GGX; Beckmann samples D(m) cos(theta_m).
         self.sample_visible = sample_visible and kind == GGX
 

@@ -10,8 +10,9 @@ import numbers
 import drjit as dr
 import mitsuba as mi
 
+from ..plugins.props import ALBEDO, IOR, UNIT, Range
 from ..sampling import cosine_hemisphere_pdf, square_to_cosine_hemisphere
-from ..spectrum import cie_xyz
+from ..spectrum import cie_xyz, clamp_keep_grad
 from ..textures import load_spectrum
 from .base import BSDF_TYPES, BSDFSample, BSDFType, DIFFUSE, GLOSSY, REFLECTION, TRANSMISSION
 from .fresnel import fresnel_dielectric, reflect_about, refract_about
@@ -44,12 +45,14 @@ def _r0(eta):
 
 
 def _alphas(anisotropic, roughness, has_aniso: bool):
+    # Mitsuba's floor of 0.001 on alpha, keeping the derivative below it (the floor is
+    # numerical; an optimisation may start at roughness 0).
     r2 = roughness * roughness
     if not has_aniso:
-        a = dr.maximum(r2, 0.001)
+        a = clamp_keep_grad(r2, 0.001)
         return a, a
     aspect = dr.sqrt(1.0 - 0.9 * anisotropic)
-    return dr.maximum(r2 / aspect, 0.001), dr.maximum(r2 * aspect, 0.001)
+    return clamp_keep_grad(r2 / aspect, 0.001), clamp_keep_grad(r2 * aspect, 0.001)
 
 
 def _luminance(spectrum, lam):
@@ -123,14 +126,17 @@ class _PrincipledFamily(BSDFType):
     _OPTIONAL: tuple = ()
     _RATES: tuple = ()
     _UNBOUNDED: tuple = ()
+    # The parameters' ranges (Mitsuba's documented ones); the others are fractions in [0, 1].
+    _RANGES = {"base_color": ALBEDO, "eta": IOR, "diff_trans": Range(0.0, 2.0)}
 
     def _parse(self, loader, props, inst: dict) -> None:
         for name, default in self._ALWAYS:
             inst[name] = load_spectrum(loader, props.raw(name, default), props.key(name), emitter=False,
-                                       unbounded=name in self._UNBOUNDED)
+                                       unbounded=name in self._UNBOUNDED, valid=self._RANGES.get(name, UNIT))
         for name in self._OPTIONAL:
             v = props.raw(name)
-            inst[name] = None if _is_off(v) else load_spectrum(loader, v, props.key(name), emitter=False)
+            inst[name] = None if _is_off(v) else load_spectrum(loader, v, props.key(name), emitter=False,
+                                                               valid=self._RANGES.get(name, UNIT))
         for name in self._RATES:
             inst[name] = props.float(name, 1.0, min=0.0)
 

@@ -7,11 +7,16 @@ Passes bound memory; their number follows from :func:`max_samples_per_pass`.
 Differentiation follows Path Replay Backpropagation: ``sample`` is written once with a
 ``mode``; the primal pass accumulates radiance, the adjoint passes replay the same
 paths (same random numbers) and propagate the adjoint radiance to scene parameters.
+
+Samples whose value is not finite (NaN or inf) are replaced by 0, so that an image stays
+finite, and counted (:class:`NonFinite`, inside the rendering kernels); ``pbr.render``
+reports the count (``on_nonfinite``).
 """
 
 from __future__ import annotations
 
 import os
+import warnings
 
 import drjit as dr
 import mitsuba as mi
@@ -27,6 +32,7 @@ from ..plugins.registry import Registry
 from ..spectrum import SampledWavelengths
 
 PRIMAL, FORWARD, BACKWARD = "primal", "forward", "backward"
+NONFINITE_POLICIES = ("warn", "raise", "ignore")
 # Type name -> integrator class (each integrator registers itself in its module).
 INTEGRATORS = Registry("integrator")
 # Camera samples per pass, by backend. Each pass is traced anew in Python (tens of ms for
@@ -52,6 +58,47 @@ def max_samples_per_pass() -> int:
     return n
 
 
+class NonFinite:
+    """The number of sample values that were not finite (NaN or inf) and were replaced
+    by 0: a one-entry counter that :meth:`replace` increments inside the kernel that
+    makes the values (one local reduction and one atomic add per SIMD packet or GPU warp,
+    no kernel of its own); :meth:`report` reads it after the render."""
+
+    def __init__(self, policy: str = "warn"):
+        if policy not in NONFINITE_POLICIES:
+            raise ValueError(f"on_nonfinite must be one of {', '.join(map(repr, NONFINITE_POLICIES))}, "
+                             f"got {policy!r}")
+        self.policy = policy
+        self.count = dr.zeros(mi.UInt32, 1)
+
+    def replace(self, values, active=True):
+        """``values`` (Dr.Jit arrays of one sample each per lane) with every value of a
+        lane set to 0 where any of them is not finite; such lanes are counted."""
+        ok = mi.Bool(True)
+        for v in values:
+            ok &= dr.all(dr.isfinite(v)) if dr.depth_v(v) > 1 else dr.isfinite(v)
+        dr.scatter_reduce(dr.ReduceOp.Add, self.count, mi.UInt32(1), mi.UInt32(0), active & ~ok,
+                          mode=dr.ReduceMode.Local)
+        return [dr.select(ok, v, 0.0) for v in values]
+
+    def report(self, what: str = "pbr.render") -> int:
+        """Read the count (not inside ``dr.freeze``, which cannot read values; nor with
+        the policy 'ignore') and warn ('warn') or raise ``FloatingPointError`` ('raise')
+        if it is not 0. Returns the count (0 when not read)."""
+        policy = self.policy
+        if policy == "ignore" or dr.flag(dr.JitFlag.FreezingScope):
+            return 0
+        n = int(self.count[0])
+        if n:
+            msg = (f"{what}: {n} sample{'s were' if n > 1 else ' was'} NaN or infinite and counted as 0 "
+                   f"(the image is too dark where they fell): a scene value that overflows, or a numerical "
+                   f"failure; on_nonfinite='raise' stops here, 'ignore' silences this")
+            if policy == "raise":
+                raise FloatingPointError(msg)
+            warnings.warn(msg, RuntimeWarning, stacklevel=3)
+        return n
+
+
 class SamplingIntegrator:
     """Base of every integrator: camera samples in passes, the film, and the adjoint
     passes of differentiable integrators (``differentiable = True``)."""
@@ -67,6 +114,8 @@ class SamplingIntegrator:
     # Records a function's kernels once and replays them (dr.freeze for pbr scenes): set
     # by pbr.freeze, a layer above the integrators; None where pbr.freeze is not loaded.
     recorder = None
+    # The count of non-finite samples of the current render (pbr.render sets a fresh one).
+    nonfinite = None
 
     def __init__(self, props):
         self.path = props.path
@@ -97,6 +146,12 @@ class SamplingIntegrator:
                                      f"from a {t!r} emitter (supported: {', '.join(emitting)})")
             if len(scene.media):
                 raise SceneError(f"{self.path}: the {self.name} integrator does not support participating media")
+
+    def counter(self) -> NonFinite:
+        """The non-finite sample counter of the current render (made on first use)."""
+        if not isinstance(self.nonfinite, NonFinite):
+            self.nonfinite = NonFinite()
+        return self.nonfinite
 
     # -- subclasses -----------------------------------------------------------------
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
@@ -149,9 +204,8 @@ class SamplingIntegrator:
                 rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
                 out = radiance(rng, ray, wl, inside)
                 L, extra = out if isinstance(out, tuple) else (out, ())
-                xyz = spec.to_xyz(L, wl) * weight
-                xyz = dr.select(dr.isfinite(xyz), xyz, 0.0)
-                extra = [dr.select(dr.isfinite(c), c, 0.0) * weight for c in extra]
+                xyz, *extra = self.counter().replace([spec.to_xyz(L, wl) * weight, *extra], inside)
+                extra = [c * weight for c in extra]
                 s = _pixel_sums([*xyz, weight, *extra], w * h, per_pass)
                 sums = s if sums is None else sums + s
                 if n_pass > 1:
@@ -190,7 +244,7 @@ class SamplingIntegrator:
                 state = _snapshot(rng)
                 L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
                 dL = self._develop_adjoint(wl, weight, pixel_w, g, pixel, inside)
-                dL = dr.select(dr.isfinite(dL), dL, 0.0)
+                dL, = self.counter().replace([dL], inside)
                 # L and dL stay lazy: the primal and adjoint loops fuse into one kernel
                 rng.state, rng.inc = _snapshot(state)
                 self.sample(scene, rng, ray, wl, BACKWARD, dL, L, inside)

@@ -29,7 +29,7 @@ import numpy as np
 
 from .. import spectrum as spec
 from ..bsdfs.base import TRANSMISSION, ShadingContext
-from .base import SamplingIntegrator
+from .base import NonFinite, SamplingIntegrator
 
 # Mitsuba's ray offset (math::RayEpsilon): rays leaving a surface start this far (relative
 # to the magnitude of the point) along its normal.
@@ -50,16 +50,19 @@ class SplatFilm:
     loops); the sums are computed with that kernel. ``develop(scale)`` returns the linear
     sRGB image ``scale * sum`` (H, W, 3), numpy float64; ``scale = 1 / spp`` when every
     pixel's ``spp`` samples traced one light path each (``W H spp`` paths in all).
+    Contributions that are not finite are splatted as 0 and counted in ``nonfinite`` (the
+    integrator's :class:`~pbr.integrators.base.NonFinite`).
     """
 
-    def __init__(self, camera):
+    def __init__(self, camera, nonfinite: NonFinite | None = None):
         self.width, self.height = camera.film.size
         self.rfilter = camera.film.rfilter
         self.buf = dr.zeros(mi.Float, self.width * self.height * 3)
+        self.nonfinite = nonfinite or NonFinite()
 
     def splat(self, pos, L, wl, active):
-        xyz = spec.to_xyz(L, wl)
-        self.splat_xyz(pos, xyz, active & dr.all(dr.isfinite(xyz)))
+        xyz, = self.nonfinite.replace([spec.to_xyz(L, wl)], active)
+        self.splat_xyz(pos, xyz, active)
 
     def splat_xyz(self, pos, xyz, active):
         w, h = self.width, self.height
@@ -103,7 +106,7 @@ class LightTracingIntegrator(SamplingIntegrator):
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
         cam, w, h, spp, _, _ = self._plan(scene, sensor, spp)
         self.camera = cam
-        self.splats = SplatFilm(cam)
+        self.splats = SplatFilm(cam, self.counter())
         try:
             img = np.array(super().render(scene, sensor, seed, spp, progress), dtype=np.float64)
             img[..., :3] += self.splats.develop(1.0 / spp)

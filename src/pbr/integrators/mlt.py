@@ -260,7 +260,7 @@ class MLTIntegrator(SamplingIntegrator):
         self.prepare(scene, sensor)
         camera = scene.sensors[sensor]
         w, h = camera.film.size
-        film = SplatFilm(camera)
+        film = SplatFilm(camera, self.counter())
         if self.max_depth == 0 or not len(scene.lights):
             return mi.TensorXf(np.zeros((h, w, 3), np.float32))
         seed = seed_array(seed)
@@ -318,7 +318,7 @@ class MLTIntegrator(SamplingIntegrator):
         xyz_p, pos_p, c_p = self.contribution(scene, camera, y, chains.depth)
         xyz, pos, c = chains.xyz, chains.pos, chains.c
         a = self.acceptance(c_p, c)
-        film = SplatFilm(camera)
+        film = SplatFilm(camera, self.counter())
         film.buf = film_buf
         film.splat_xyz(pos_p, xyz_p * dr.select(c_p > 0, a / c_p, 0.0), active & (a > 0) & (c_p > 0))
         film.splat_xyz(pos, xyz * dr.select(c > 0, (1.0 - a) / c, 0.0), active & (a < 1) & (c > 0))

@@ -63,7 +63,7 @@ class ParticleTracerIntegrator(SamplingIntegrator):
         and the camera connections of one light path. Image: the splats over ``spp``."""
         self.prepare(scene, sensor)
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
-        self.camera, self.splats = cam, SplatFilm(cam)
+        self.camera, self.splats = cam, SplatFilm(cam, self.counter())
         bar = _progress(n_pass, progress)
         try:
             for p in range(n_pass):

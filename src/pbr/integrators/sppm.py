@@ -243,8 +243,7 @@ class SPPMIntegrator(SamplingIntegrator):
         si, shape = scene.geometry.intersect(vp_ray, found)
         found &= si.is_valid()
         bsdf = dr.gather(mi.UInt32, scene.shape_bsdf, shape, found)
-        Ld = spec.to_xyz(L, wl) * weight
-        Ld = dr.select(dr.isfinite(Ld), Ld, 0.0)
+        Ld, = self.counter().replace([spec.to_xyz(L, wl) * weight], inside)
         vp = VisiblePoints(si, mi.Point3f(si.p), bsdf, dr.select(found, beta * weight, 0.0), depth, found, term)
         dr.eval(vp.si, vp.p, vp.bsdf, vp.beta, vp.depth, vp.valid, vp.terminated, Ld, weight)
         return vp, Ld, weight
@@ -471,9 +470,8 @@ class SPPMIntegrator(SamplingIntegrator):
         """Hachisuka & Jensen's update with gamma = ``GAMMA``: keep a fraction gamma of the
         new photons, shrink the radius to hold the density, rescale the flux."""
         flux = mi.Spectrum(*[dr.gather(mi.Float, phi, dr.arange(mi.UInt32, dr.width(m)) * 4 + c) for c in range(4)])
-        xyz = spec.to_xyz(vp.beta * flux, wl)
-        xyz = dr.select(dr.isfinite(xyz), xyz, 0.0)
         has = m > 0
+        xyz, = self.counter().replace([spec.to_xyz(vp.beta * flux, wl)], has)
         n_new = state.N + self.GAMMA * m
         r_new = state.r * dr.sqrt(n_new * dr.rcp(state.N + m))
         state.tau = dr.select(has, (state.tau + xyz) * dr.square(r_new * dr.rcp(state.r)), state.tau)

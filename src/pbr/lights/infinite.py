@@ -14,6 +14,7 @@ import numpy as np
 from .. import spectrum as spec
 from ..image import read_image
 from ..plugins.params import ParamOwner, param_table
+from ..plugins.props import FINITE, NONNEGATIVE, RADIANCE
 from ..textures import load_spectrum
 from .base import LIGHT_TYPES, LeSample, LightSample, LightType, ReferencePoint
 
@@ -88,9 +89,8 @@ def _env_image(loader, props) -> np.ndarray:
     if img.ndim != 3 or img.shape[0] < 1 or img.shape[1] < 1:
         raise props.error(key, f"expected an (H, W, C) image, got shape {img.shape}")
     img = np.repeat(img[..., :1], 3, axis=2) if img.shape[2] < 3 else img[..., :3]
-    if not np.all(np.isfinite(img)):
-        raise props.error(key, "the environment image has non-finite values")
-    img = np.maximum(img, 0.0)
+    FINITE.check(img, props.key(key))
+    img = np.maximum(img, 0.0)      # negative texels (an EXR's ringing) are black
     H, W = img.shape[:2]
     if W < 2:
         img = np.concatenate([img, np.repeat(img[:, -1:], 2 - W, axis=1)], axis=1)
@@ -238,7 +238,8 @@ class EnvMapLight(LightType):
         scale = props.float("scale", 1.0, min=0.0)
         inst = {"rgb": img, "scale": scale, "rot": _rotation(props),
                 # Mitsuba's keys: ``<id>.data`` (H, W, 3 linear RGB texels) and ``<id>.scale``.
-                "owner": ParamOwner(props.path, data=mi.TensorXf(img), scale=mi.Float(scale)),
+                "owner": ParamOwner(props.path, valid={"data": RADIANCE, "scale": NONNEGATIVE},
+                                    data=mi.TensorXf(img), scale=mi.Float(scale)),
                 "mis_compensation": props.bool("mis_compensation", False) if self.name == "envmap" else False,
                 "id": props.id}
         return inst
@@ -261,7 +262,7 @@ class EnvMapLight(LightType):
         offs = np.concatenate([[0], np.cumsum([w * h for w, h in sizes])[:-1]]).astype(np.uint32)
         flat = dr.concat([i["owner"].params["data"].array for i in self.instances])
         k = dr.arange(mi.UInt32, dr.width(flat) // 3) * 3
-        rgb = mi.Color3f(*(dr.maximum(dr.gather(mi.Float, flat, k + c), 0.0) for c in range(3)))
+        rgb = mi.Color3f(*(spec.clamp_keep_grad(dr.gather(mi.Float, flat, k + c), 0.0) for c in range(3)))
         coeffs, sc = spec.rgb_unbounded(rgb)
         self.coeffs, self.tscale = mi.Array3f(coeffs), mi.Float(sc)
         self.size = mi.Array2u([w for w, _ in sizes], [h for _, h in sizes])

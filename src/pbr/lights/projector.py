@@ -13,7 +13,7 @@ import numpy as np
 
 from .. import spectrum as spec
 from ..cameras import _x_fov
-from ..plugins.props import Props
+from ..plugins.props import RADIANCE, Props
 from ..textures import load_spectrum, Bitmap
 from .base import (LIGHT_TYPES, apply_rows, DeltaPositionLight, gather3, light_frame, LightSample, luminance,
                    mat_rows, max_value, point_bounds, vec_table)
@@ -66,7 +66,8 @@ class ProjectorLight(DeltaPositionLight):
             slot = load_spectrum(loader, img, props.key("image"), emitter=True)
         else:
             v = props.raw("irradiance", 1.0)
-            slot = load_spectrum(loader, v, props.key("irradiance"), emitter=not _is_texture_plugin(loader, v))
+            slot = load_spectrum(loader, v, props.key("irradiance"), emitter=not _is_texture_plugin(loader, v),
+                                 valid=RADIANCE)
         t = loader.textures.items[slot]
         w, h = (t.width, t.height) if isinstance(t, Bitmap) else (1, 1)
         aspect = w / h

@@ -21,8 +21,8 @@ import mitsuba as mi
 import numpy as np
 
 from .. import spectrum as spec
-from ..plugins.params import ParamOwner
-from ..plugins.props import SceneError
+from ..plugins.params import ParamOwner, check_params
+from ..plugins.props import ALBEDO, NONNEGATIVE, SceneError
 
 MAJORANT_RES = 16
 """Cells per axis of the majorant grid (pbrt-v4 uses 16^3)."""
@@ -90,7 +90,10 @@ class GridTable:
         parameter ``<path>.data`` (Mitsuba's gridvolume key). Returns the grid index."""
         self.grids.append((grid, form))
         if path is not None and grid.shape[3] == 1:
-            self.owners.append((len(self.grids) - 1, ParamOwner(path, data=mi.TensorXf(grid))))
+            valid = {"data": ALBEDO if form == "albedo" else NONNEGATIVE}
+            owner = ParamOwner(path, valid=valid, data=mi.TensorXf(grid))
+            check_params(owner, path=path)
+            self.owners.append((len(self.grids) - 1, owner))
         return len(self.grids) - 1
 
     def _sync(self) -> dict:
@@ -103,7 +106,7 @@ class GridTable:
             if tuple(data.shape) != g.shape:
                 raise ValueError(f"{owner.path}.data: shape {tuple(data.shape)} must stay {g.shape}")
             self.grids[gid] = (np.maximum(np.asarray(dr.detach(data), np.float32), 0.0), form)
-            ad[gid] = dr.maximum(data.array, 0.0)
+            ad[gid] = spec.clamp_keep_grad(data.array, 0.0)   # an empty voxel keeps its derivative
         return ad
 
     def max_bound(self, gid: int) -> np.ndarray:

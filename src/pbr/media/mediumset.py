@@ -29,7 +29,7 @@ import numpy as np
 from ..backend import Struct
 from ..phase import HG, PHASE_TYPES, G_MAX, phase_eval, phase_sample
 from ..plugins.params import ParamOwner, param_table
-from ..plugins.props import Props, SceneError
+from ..plugins.props import ALBEDO, HG_ASYMMETRY, NONNEGATIVE, Props, Range, SceneError
 from ..plugins.registry import Registry
 from ..textures import CONSTANT, load_spectrum
 from .grid import GridTable, MAJORANT_RES, as_grid, cell_maxima, read_vol
@@ -41,6 +41,9 @@ MEDIUM_TYPES.update(homogeneous="_homogeneous", heterogeneous="_heterogeneous", 
 
 TA, AS = 0, 1          # parameter forms: (sigma_t, albedo) or (sigma_a, sigma_s)
 NO_GRID = 0xFFFFFFFF
+
+# The range of a medium coefficient (sigma_t, sigma_a, sigma_s).
+_COEFF = Range(0.0, what="a medium coefficient")
 
 
 class MediumProperties(Struct):
@@ -100,7 +103,7 @@ class MediumSet:
         first_slot = len(loader.textures.items)
         getattr(self, MEDIUM_TYPES[props.type])(loader, props, m)
         self._emission(loader, props, m)
-        m.owner = ParamOwner(props.path, scale=mi.Float(m.scale))
+        m.owner = ParamOwner(props.path, valid={"scale": NONNEGATIVE}, scale=mi.Float(m.scale))
         m.phase = self._phase(props)
         if m.phase[0] == HG and (props.has("g") or any(c["type"] == "hg" for _, c in props.children())):
             m.owner.params["phase_function.g"] = mi.Float(m.phase[1])
@@ -147,17 +150,11 @@ class MediumSet:
         if isinstance(v, dict) and v.get("type") not in ("rgb", "spectrum", "blackbody", "d65", "ref"):
             raise SceneError(f"{path}: expected a float, rgb, spectrum or constvolume, got type {v.get('type')!r}")
         unbounded = False
-        if isinstance(v, dict) and v.get("type") == "rgb":
-            rgb = np.asarray(v.get("value", 0.0), np.float64).ravel()
-            if bounded and (np.any(rgb < 0) or np.any(rgb > 1)):
-                raise SceneError(f"{path}.value: an albedo must lie in [0, 1], got {rgb.tolist()}")
+        if isinstance(v, dict) and v.get("type") == "rgb" and not bounded:
             # RGB values within [0, 1] use the reflectance upsampling (as Mitsuba does);
             # larger ones pbrt-v4's unbounded form (Mitsuba would squash them).
-            unbounded = bool(np.any(rgb > 1))
-        if isinstance(v, (int, float)) and not isinstance(v, bool):
-            if v < 0 or (bounded and v > 1):
-                raise SceneError(f"{path}: expected a value in [0, {'1' if bounded else 'inf'}), got {v}")
-        slot = load_spectrum(loader, v, path, emitter=False, unbounded=unbounded)
+            unbounded = bool(np.any(np.asarray(v.get("value", 0.0), np.float64) > 1))
+        slot = load_spectrum(loader, v, path, emitter=False, unbounded=unbounded, valid=ALBEDO if bounded else _COEFF)
         if loader.textures.kind_of(slot) != CONSTANT:
             raise SceneError(f"{path}: a medium coefficient must be a constant spectrum (not a texture)")
         return slot
@@ -331,7 +328,7 @@ class MediumSet:
         if props.has("g"):  # pbrt-v4: Henyey-Greenstein asymmetry on the medium
             if kids:
                 raise props.error("g", "give either 'g' or a phase function, not both")
-            return HG, props.float("g", min=-1.0, max=1.0)
+            return HG, props.float("g", valid=HG_ASYMMETRY)
         if not kids:
             return HG, 0.0
         if len(kids) > 1:

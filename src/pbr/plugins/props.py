@@ -1,8 +1,15 @@
-"""Typed, key-path-aware access to one plugin's dict of parameters.
+"""Typed, key-path-aware access to one plugin's dict of parameters, and the ranges
+parameter values must lie in.
 
 Every plugin constructor receives a :class:`Props`. Reading a parameter marks it used;
 :meth:`Props.finish` then rejects anything left over, naming its full key path (e.g.
 ``scene.red-wall.bsdf.reflectance.valu``), so typos never pass silently.
+
+:class:`Range` is the one check of a parameter's values, wherever they come from:
+:meth:`Props.float` (scalars), the texture loaders (spectra and textures:
+``pbr.textures.load_spectrum``), and ``params.update()`` after ``pbr.traverse``
+(:func:`pbr.plugins.params.check_params`). Values must be finite and in the
+parameter's physical range (albedos in [0, 1], radiance >= 0, an IOR > 0, ...).
 """
 
 from __future__ import annotations
@@ -14,6 +21,71 @@ import numpy as np
 
 class SceneError(ValueError):
     """Invalid scene description; the message starts with the offending key path."""
+
+
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
+class Range:
+    """The valid values of a parameter: finite (also in float32, as pbr renders), and
+    within ``[lo, hi]`` (a bound is exclusive when ``open_lo``/``open_hi``; None:
+    unbounded). ``what`` names the quantity in messages ("an albedo", "an IOR")."""
+
+    def __init__(self, lo=None, hi=None, open_lo=False, open_hi=False, what=""):
+        self.lo, self.hi, self.open_lo, self.open_hi, self.what = lo, hi, open_lo, open_hi, what
+
+    def __repr__(self):
+        return f"Range({self})"
+
+    def __str__(self):
+        if self.lo is not None and self.hi is not None:
+            return f"in {'(' if self.open_lo else '['}{self.lo:g}, {self.hi:g}{')' if self.open_hi else ']'}"
+        if self.lo is not None:
+            return "positive" if self.lo == 0 and self.open_lo else f"{'>' if self.open_lo else '>='} {self.lo:g}"
+        if self.hi is not None:
+            return f"{'<' if self.open_hi else '<='} {self.hi:g}"
+        return "finite"
+
+    def bad(self, a):
+        """Mask of the values of ``a`` (a NumPy or a Dr.Jit array) outside the range,
+        non-finite ones included."""
+        bad = ~(abs(a) <= _FLOAT32_MAX)      # NaN, inf, and what float32 rounds to inf
+        if self.lo is not None:
+            bad |= (a <= self.lo) if self.open_lo else (a < self.lo)
+        if self.hi is not None:
+            bad |= (a >= self.hi) if self.open_hi else (a > self.hi)
+        return bad
+
+    def check(self, value, where: str, at=None) -> None:
+        """Raise a :class:`SceneError` naming ``where`` unless every value of ``value``
+        (a number or an array of any shape) is finite and in range; ``at`` names the
+        position of a bad value of a 1D array (index -> text), instead of its index."""
+        a = np.asarray(value, np.float64)
+        bad = self.bad(a)
+        if not bad.any():
+            return
+        expected = f"must be {self}" + (f" ({self.what})" if self.what else "")
+        if a.size == 1:
+            raise SceneError(f"{where}: {expected}, got {a.reshape(-1)[0]:g}")
+        first = np.unravel_index(np.argmax(bad), a.shape)
+        pos = (f"index {tuple(int(i) for i in first)}" if a.ndim > 1 else
+               at(int(first[0])) if at is not None else f"index {int(first[0])}")
+        raise SceneError(f"{where}: {expected}, got {a[first]:g} at {pos} ({int(bad.sum())} of {a.size} values)")
+
+    def factor(self) -> "Range":
+        """The range of a factor on values of this range (a ``scale`` texture): >= 0 if
+        the values must be, else any finite number."""
+        return NONNEGATIVE if self.lo is not None and self.lo >= 0 else FINITE
+
+
+FINITE = Range()
+NONNEGATIVE = Range(0.0)
+UNIT = Range(0.0, 1.0)
+ALBEDO = Range(0.0, 1.0, what="an albedo")
+RADIANCE = Range(0.0, what="radiance")
+IOR = Range(0.0, open_lo=True, what="an index of refraction")
+ROUGHNESS = Range(0.0, what="a roughness")
+HG_ASYMMETRY = Range(-1.0, 1.0, what="a Henyey-Greenstein asymmetry")
 
 
 def _is_transform(v) -> bool:
@@ -56,7 +128,8 @@ class Props:
             raise SceneError(f"{self.key(k)}: unknown parameter {k!r} for plugin type {self.type!r}")
 
     # -- typed getters --------------------------------------------------------------
-    def float(self, name: str, default=None, min=None, max=None) -> float:
+    def float(self, name: str, default=None, min=None, max=None, valid: Range | None = None) -> float:
+        """A finite number in [min, max] (or in the range ``valid``)."""
         v = self.raw(name, default)
         if v is None:
             raise self.error(name, "missing required float parameter")
@@ -66,12 +139,7 @@ class Props:
             except (TypeError, ValueError):
                 raise self.error(name, f"expected a number, got {v!r}") from None
         v = float(v)
-        if not np.isfinite(v):
-            raise self.error(name, f"expected a finite number, got {v}")
-        if min is not None and v < min:
-            raise self.error(name, f"must be >= {min}, got {v}")
-        if max is not None and v > max:
-            raise self.error(name, f"must be <= {max}, got {v}")
+        (valid or Range(min, max)).check(v, self.key(name))
         return v
 
     def int(self, name: str, default=None, min=None) -> int:

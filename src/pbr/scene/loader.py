@@ -23,12 +23,12 @@ from ..geometry import SHAPE_PARAMS, shape_to_mitsuba
 from ..integrators import INTEGRATORS
 from ..lights import LIGHT_TYPES, LightSet
 from ..media import MEDIUM_TYPES, MediumSet
-from ..plugins.props import Props, SceneError
+from ..plugins.props import FINITE, Props, SceneError
 from ..textures import TEXTURE_TYPES, TextureSet, load_spectrum
 from .objects import load_object
 from .params import mitsuba_key_paths
 from .scene import Scene, ShapeList
-from .xml import parse_file
+from .xml import locate, parse_file_lines
 
 # Emitter types a shape can carry.
 SURFACE_EMITTERS = ("area", "directionalarea")
@@ -198,8 +198,9 @@ class Loader:
             elif t in SHAPE_PARAMS:
                 self._shape(key, v, shapes, defaults)
             elif t in TEXTURE_TYPES and (t != "mix" or "tex1" in v or "tex2" in v):
-                # pbrt-v4 has both a mix texture (tex1, tex2) and a mix material.
-                load_spectrum(self, v, path, emitter=False)
+                # pbrt-v4 has both a mix texture (tex1, tex2) and a mix material. Its range
+                # is checked where it is referenced; here only that it is finite.
+                load_spectrum(self, v, path, emitter=False, valid=FINITE)
             elif t in bsdf_names():
                 self.bsdf(v, path)
             elif t in LIGHT_TYPES:
@@ -239,5 +240,8 @@ def load_file(path: str, parallel: bool = True, optimize: bool = True, **kwargs)
     ext = os.path.splitext(path)[1].lower()
     if ext != ".xml":
         raise SceneError(f"{path}: unsupported scene format {ext!r} (supported: .xml)")
-    d = parse_file(path, **kwargs)
-    return load_dict(d, base_dir=os.path.dirname(os.path.abspath(path)))
+    d, lines = parse_file_lines(path, **kwargs)
+    try:
+        return load_dict(d, base_dir=os.path.dirname(os.path.abspath(path)))
+    except SceneError as e:     # name the XML element too
+        raise SceneError(locate(str(e), lines)) from None

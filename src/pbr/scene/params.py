@@ -51,6 +51,7 @@ from ..cameras import SENSORS
 from ..geometry import SHAPE_PARAMS
 from ..lights import LIGHT_TYPES
 from ..media import MEDIUM_TYPES
+from ..plugins.params import check_params
 from ..plugins.tables import map_tables
 from .views import variant_types
 
@@ -371,8 +372,11 @@ class SceneParameters:
         refresh what depends on the changed parameters. Returns Mitsuba's kind of answer:
         a list of ``(object, set of parameter names)`` for each object that changed.
 
-        When every changed key is a BSDF's constant or bitmap texture or a BSDF's own
-        scalar (a dielectric's or coating's ``eta``), only those value tables are
+        Assigned values are checked first: finite, and in the parameter's range (an
+        albedo in [0, 1], radiance >= 0, ...), else ``pbr.SceneError`` naming the key (clip
+        an optimiser's values into range before the update; not checked inside
+        ``dr.freeze``). When every changed key is a BSDF's constant or bitmap texture or a
+        BSDF's own scalar (a dielectric's or coating's ``eta``), only those value tables are
         recomputed, with Dr.Jit operations alone (so that an update can be part of a
         ``dr.freeze``-recorded step). Sensor keys need nothing rebuilt (the next render
         reads them). Geometry keys make Mitsuba rebuild the shapes and its acceleration
@@ -395,6 +399,12 @@ class SceneParameters:
         for k, p in dirty.items():
             changed.setdefault(id(p.owner), (p.owner, set()))[1].add(p.name.rsplit(".", 1)[-1])
         freezing = dr.flag(dr.JitFlag.FreezingScope)
+        # The assigned values must be finite and in their ranges (a SceneError names the
+        # key). Not inside dr.freeze, which cannot read values.
+        if not freezing:
+            for k in sorted(pbr_keys):
+                p = params[k]
+                check_params(p.owner, [p.name], path=k[:-len(p.name) - 1] if k.endswith("." + p.name) else None)
         if freezing and (geometry or sensors):
             raise RuntimeError(
                 f"params.update(): {', '.join(sorted(geometry + sensors))} cannot be updated inside a "

@@ -6,9 +6,11 @@ form, so one code path (dict validation and assembly) serves both, and so that
 ``mi.load_dict(parse_file(p))`` builds the same scene as ``mi.load_file(p)``.
 
 Every error raises :class:`XMLError`, whose message starts with ``"<file>:<line>: "``
-pointing at the offending element. Supported: all object tags, every property tag
-Mitsuba 3 has (plus ``<blackbody>``), transforms, ``<ref>``, ``<alias>``,
-``<default>`` with ``$name`` substitution and keyword overrides, and ``<include>``.
+pointing at the offending element; :func:`parse_file_lines` also returns where each key
+path of the dict came from, so that the loader's errors can name the line too.
+Supported: all object tags, every property tag Mitsuba 3 has (plus ``<blackbody>``),
+transforms, ``<ref>``, ``<alias>``, ``<default>`` with ``$name`` substitution and keyword
+overrides, and ``<include>``.
 Scenes older than version 2.0.0 (camelCase parameter names) are rejected. Where
 Mitsuba's own reading is surprising we follow it, for parity: ``<rotate>`` does not
 normalise its axis, ``<lookat>`` without ``up`` picks Mitsuba's up vector, and keyword
@@ -32,7 +34,7 @@ from ..lights import LIGHT_TYPES
 from ..media import MEDIUM_TYPES
 from ..phase import PHASE_TYPES
 
-__all__ = ["XMLError", "parse_file", "parse_string"]
+__all__ = ["XMLError", "parse_file", "parse_file_lines", "parse_string"]
 
 
 class XMLError(ValueError):
@@ -93,6 +95,7 @@ class _Entries:
         self.d = d
         self.generated: set[str] = set()
         self.counters: dict[str, int] = {}
+        self.nodes: dict[str, _Node] = {}      # key -> the element it came from
 
     def add(self, key: str | None, value, tag: str, node: _Node, err) -> str:
         """Insert value under key (or a generated '<tag>_<n>' key if None)."""
@@ -107,7 +110,9 @@ class _Entries:
             self.generated.discard(key)
             self.generated.add(new)
             self.d = {(new if k == key else k): v for k, v in self.d.items()}
+            self.nodes[new] = self.nodes[key]
         self.d[key] = value
+        self.nodes[key] = node
         return key
 
     def _fresh(self, tag: str) -> str:
@@ -130,6 +135,7 @@ class _Parser:
         self.refs: list[tuple[dict, _Node]] = []
         self.include_stack: list[str] = []
         self.root_dir = os.getcwd()
+        self.nodes: dict[int, dict] = {}      # id(plugin dict) -> its entries' elements
 
     # ----------------------------------------------------------------- helpers
     @staticmethod
@@ -266,7 +272,20 @@ class _Parser:
             d["id"] = a["id"]
         entries = _Entries(d)
         self.children(node, entries, base_dir, is_scene=node.tag == "scene")
+        self.nodes[id(entries.d)] = entries.nodes
         return entries.d
+
+    def lines(self, d: dict, path: str = "scene", out: dict | None = None) -> dict:
+        """Key path (``scene.<id>.<name>...``, as the loader names them) -> ``file:line``
+        of the element that gave it, for ``d`` and the dicts nested in it."""
+        out = {} if out is None else out
+        nodes = self.nodes.get(id(d), {})
+        for k, v in d.items():
+            if k in nodes:
+                out[f"{path}.{k}"] = f"{nodes[k].file}:{nodes[k].line}"
+            if isinstance(v, dict):
+                self.lines(v, f"{path}.{k}", out)
+        return out
 
     def declare(self, node: _Node, ident: str):
         """Record a new global id; ids must be unique across the scene."""
@@ -499,6 +518,12 @@ def parse_file(path, **kwargs) -> dict:
 
     kwargs override ``<default>`` parameters, as in ``mi.load_file(path, **kwargs)``.
     """
+    return parse_file_lines(path, **kwargs)[0]
+
+
+def parse_file_lines(path, **kwargs) -> tuple[dict, dict]:
+    """:func:`parse_file`, and the ``file:line`` of each key path of the dict
+    (``{'scene.light.emitter.radiance': 'scene.xml:12', ...}``)."""
     path = os.fspath(path)
     try:
         with open(path, "rb") as f:
@@ -508,7 +533,19 @@ def parse_file(path, **kwargs) -> dict:
     base_dir = os.path.dirname(os.path.abspath(path))
     p = _Parser(kwargs)
     p.include_stack.append(os.path.abspath(path))
-    return p.parse_root(_read_tree(text, path), base_dir)
+    d = p.parse_root(_read_tree(text, path), base_dir)
+    return d, p.lines(d)
+
+
+def locate(error: str, lines: dict) -> str:
+    """An error message that starts with a key path, prefixed with the ``file:line`` of
+    the longest prefix of that path in ``lines`` (unchanged if there is none)."""
+    key = error.split(": ", 1)[0].split(".")
+    for n in range(len(key), 1, -1):
+        where = lines.get(".".join(key[:n]))
+        if where is not None:
+            return f"{where}: {error}"
+    return error
 
 
 def _parse(text, file: str, base_dir: str, kwargs: dict) -> dict:

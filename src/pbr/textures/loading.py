@@ -9,6 +9,10 @@ and zero outside their range (as Mitsuba's ``regular``/``irregular`` spectra). E
 use the illuminant (D65) form for RGB and floats, as Mitsuba's spectral variants do.
 Children of combinators get key paths below their parent (``mat.reflectance.tex.data``,
 ``mat.reflectance.amount.value``), as nested textures do in ``mi.traverse``.
+
+Every value is checked against the parameter's range (:class:`~pbr.plugins.props.Range`:
+finite, and e.g. an albedo in [0, 1], radiance >= 0); the texture keeps the range for
+``params.update()`` (:func:`~pbr.plugins.params.check_params`).
 """
 
 from __future__ import annotations
@@ -20,29 +24,53 @@ import numpy as np
 
 from .. import spectrum as spec
 from ..image import linear_to_srgb, read_image
-from ..plugins.props import Props, SceneError
+from ..plugins.params import check_params
+from ..plugins.props import ALBEDO, FINITE, RADIANCE, UNIT, Props, Range, SceneError
 from ..plugins.registry import Registry
 from . import meshattr
 from .kinds import (BASE_ONE, BASE_SIGMOID, BASE_TABLE, CONSTANT, OP_CHECKER, OP_MIX, OP_SCALE, TAB_N, Bitmap,
-                    Checkerboard, Composite, ConstantSpectrum)
+                    Checkerboard, Composite, ConstantSpectrum, MeshAttribute)
 
 # Type name -> loading function ``fn(loader, props, form, emitter, unbounded) -> slot``
 # (``mix`` is also a BSDF type: the scene loader tells them apart).
 TEXTURE_TYPES = Registry("texture")
 
 
-def load_spectrum(loader, value, path: str, emitter: bool, unbounded: bool = False) -> int:
+def default_range(emitter: bool, unbounded: bool) -> Range:
+    """The range of a spectrum-valued parameter that names none: radiance >= 0 for
+    emitters, any finite value for unbounded spectra, else an albedo in [0, 1]."""
+    return RADIANCE if emitter else (FINITE if unbounded else ALBEDO)
+
+
+def load_spectrum(loader, value, path: str, emitter: bool, unbounded: bool = False, valid: Range | None = None) -> int:
     """The texture slot of a spectrum-valued parameter ``value`` at key path ``path``: a
     float, or a dict ``{'type': 'rgb'|'spectrum'|'blackbody'|'d65'|'uniform'|
     'checkerboard'|'bitmap'|'scale'|'mix'|'mesh_attribute'|'ref', ...}`` as in Mitsuba
     dicts. ``emitter``: the illuminant form; ``unbounded``: RGB values may exceed 1.
-    The texture keeps ``path`` as its key for :func:`pbr.traverse` (``red.reflectance``)."""
+    ``valid``: the range of the values (default: :func:`default_range`; the textures
+    nested in a texture have their parent's, which the loader holds in
+    ``texture_range`` meanwhile). The texture keeps ``path`` as its key for
+    :func:`pbr.traverse` (``red.reflectance``)."""
+    outer = getattr(loader, "texture_range", None)
+    valid = valid or outer or default_range(emitter, unbounded)
+    loader.texture_range = valid
+    try:
+        return _load_spectrum(loader, value, path, emitter, unbounded, valid)
+    finally:
+        loader.texture_range = outer
+
+
+def _load_spectrum(loader, value, path, emitter, unbounded, valid) -> int:
     textures = loader.textures
     if isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool):
+        valid.check(value, path)
         v = float(value)
         if emitter:
-            return textures.add(ConstantSpectrum(path, BASE_SIGMOID, "illuminant", mi.Color3f(v)))
-        return textures.add(ConstantSpectrum(path, BASE_ONE, value=mi.Float(v)))
+            tex = ConstantSpectrum(path, BASE_SIGMOID, "illuminant", mi.Color3f(v))
+        else:
+            tex = ConstantSpectrum(path, BASE_ONE, value=mi.Float(v))
+        tex.valid = {"value": valid}
+        return textures.add(tex)
     if not isinstance(value, dict) or "type" not in value:
         raise SceneError(f"{path}: expected a float or a texture/spectrum dict with a 'type', got {value!r}")
     p = Props(value, path, loader)
@@ -54,7 +82,30 @@ def load_spectrum(loader, value, path: str, emitter: bool, unbounded: bool = Fal
         raise SceneError(f"{path}: unsupported texture/spectrum type {p.type!r} (supported: "
                          f"{TEXTURE_TYPES.supported()}, ref)")
     form = "illuminant" if emitter else ("unbounded" if unbounded else "albedo")
-    return TEXTURE_TYPES[p.type](loader, p, form, emitter, unbounded)
+    slot = TEXTURE_TYPES[p.type](loader, p, form, emitter, unbounded)
+    _check_texture(textures.items[slot], valid, path)
+    return slot
+
+
+def _check_texture(tex, valid: Range, path: str) -> None:
+    """Check a new texture's values against ``valid`` and keep the ranges of its
+    parameters for ``params.update()``. Albedo bitmaps are exempt from the range (their
+    texels are clipped to [0, 1] when read, as Mitsuba's upsampling does), not from
+    finiteness."""
+    if isinstance(tex, Bitmap):
+        tex.valid = {"data": valid}
+        data = np.asarray(tex.raw_values if tex.raw_values is not None else tex.params["data"])
+        (FINITE if tex.form == "albedo" else valid).check(data, f"{path}.data")
+        return
+    if isinstance(tex, MeshAttribute):
+        tex.valid = {"scale": valid.factor()}
+    elif isinstance(tex, ConstantSpectrum):
+        tex.valid = {"value": valid}
+        if tex.table is not None:
+            valid.check(tex.table, f"{path}.value", at=lambda i: f"{spec.LAMBDA_MIN + i:g} nm")
+        if tex.scale != 1.0:
+            valid.factor().check(tex.scale, f"{path}.scale")
+    check_params(tex, path=path)
 
 
 def add_tabulated(loader, wavelengths, values, path: str) -> int:
@@ -66,8 +117,9 @@ def table_from_pairs(wl: np.ndarray, vals: np.ndarray, where: str) -> np.ndarray
     """(wavelength, value) samples -> the 1 nm table of a tabulated spectrum."""
     wl = np.asarray(wl, np.float64)
     vals = np.asarray(vals, np.float64)
-    if wl.size < 2 or np.any(np.diff(wl) <= 0):
+    if wl.size < 2 or not np.all(np.diff(wl) > 0):
         raise SceneError(f"{where}: wavelengths must be at least two strictly increasing values")
+    FINITE.check(vals, where, at=lambda i: f"{wl[i]:g} nm")
     grid = spec.LAMBDA_MIN + np.arange(TAB_N)
     # Zero outside the given range, as Mitsuba's irregular/regular spectra.
     return np.where((grid >= wl[0]) & (grid <= wl[-1]), np.interp(grid, wl, vals), 0.0)
@@ -87,8 +139,6 @@ def _rgb(loader, p, form, emitter, unbounded):
     =====  =====  =======  =====================
     """
     rgb = p.vector3("value")
-    if form == "albedo" and (np.any(rgb < 0) or np.any(rgb > 1)):
-        raise p.error("value", f"RGB reflectance must lie in [0, 1], got {rgb.tolist()}")
     p.finish()
     return loader.textures.add(ConstantSpectrum(p.path, BASE_SIGMOID, form, mi.Color3f(*map(float, rgb))))
 
@@ -109,7 +159,8 @@ def _spectrum(loader, p, form, emitter, unbounded):
     if p.has("filename"):
         wl, vals = spec.read_spd(loader.resolve_path(p.string("filename"), p.key("filename")))
         p.finish()
-        return textures.add(ConstantSpectrum(path, BASE_TABLE, table=table_from_pairs(wl, vals, path)))
+        table = table_from_pairs(wl, vals, p.key("filename"))
+        return textures.add(ConstantSpectrum(path, BASE_TABLE, table=table))
     v = p.raw("value")
     p.finish()
     if isinstance(v, (int, float)) and not isinstance(v, bool):
@@ -126,7 +177,8 @@ def _spectrum(loader, p, form, emitter, unbounded):
         arr = np.empty(0)
     if arr.ndim != 2 or arr.shape[1] != 2:
         raise SceneError(f"{path}.value: expected a float or a list of (wavelength, value) pairs, got {v!r}")
-    return textures.add(ConstantSpectrum(path, BASE_TABLE, table=table_from_pairs(arr[:, 0], arr[:, 1], path)))
+    table = table_from_pairs(arr[:, 0], arr[:, 1], f"{path}.value")
+    return textures.add(ConstantSpectrum(path, BASE_TABLE, table=table))
 
 
 @TEXTURE_TYPES.register("blackbody")
@@ -225,7 +277,8 @@ def _scale(loader, p, form, emitter, unbounded):
     # pbrt-v4's ``scale``: tex * scale. The factor is a plain (unbounded, never
     # illuminant) spectrum, so that an emitter's scaled radiance carries D65 once.
     x = load_spectrum(loader, p.raw("tex", 1.0), p.key("tex"), emitter, unbounded)
-    m = load_spectrum(loader, p.raw("scale", 1.0), p.key("scale"), emitter=False, unbounded=True)
+    m = load_spectrum(loader, p.raw("scale", 1.0), p.key("scale"), emitter=False, unbounded=True,
+                      valid=loader.texture_range.factor())
     p.finish()
     return loader.textures.add(Composite(p.path, OP_SCALE, x, m=m))
 
@@ -245,7 +298,7 @@ def _mix(loader, p, form, emitter, unbounded):
     # pbrt-v4's ``mix``: (1 - amount) tex1 + amount tex2 (defaults 0, 1 and 0.5).
     x = load_spectrum(loader, p.raw("tex1", 0.0), p.key("tex1"), emitter, unbounded)
     y = load_spectrum(loader, p.raw("tex2", 1.0), p.key("tex2"), emitter, unbounded)
-    m = load_spectrum(loader, p.raw("amount", 0.5), p.key("amount"), emitter=False)
+    m = load_spectrum(loader, p.raw("amount", 0.5), p.key("amount"), emitter=False, valid=UNIT)
     p.finish()
     return loader.textures.add(Composite(p.path, OP_MIX, x, y, m))
 
