@@ -168,8 +168,8 @@ UPDATES = [
     ("glass.bsdf.eta", lambda v: mi.Float(0.0), "0"),
     ("sky.data", lambda v: mi.TensorXf(-np.ones((4, 8, 3), np.float32)), "-1"),
     ("sky.scale", lambda v: mi.Float(NAN), "nan"),
-    ("fog.interior.sigma_t.value", lambda v: mi.Float(NAN), "nan"),
-    ("fog.interior.albedo.value", lambda v: mi.Float(1.5), "1.5"),
+    ("fog.interior_medium.sigma_t.value.value", lambda v: mi.Float(NAN), "nan"),
+    ("fog.interior_medium.albedo.value.value", lambda v: mi.Float(1.5), "1.5"),
 ]
 
 
