@@ -7,7 +7,8 @@ A mutant's outcome is one of
 
 - ``rejected``: loading raised one of pbr's own errors (``SceneError``, ``XMLError``,
   ``FileNotFoundError``) whose message names a place (a key path or ``file:line``);
-- ``rendered``: it loaded and rendered a finite image;
+- ``rendered``: it loaded and rendered a finite image, every sample finite
+  (``on_nonfinite="raise"``);
 - ``bad``: anything else: a crash, a Python or Dr.Jit exception from inside pbr, an
   error that names no place, or an image with NaN/Inf. Each is a bug.
 
@@ -117,7 +118,7 @@ def run_one(path: str, text: str, tmpdir: str, res: int = 8) -> tuple[str, str]:
     except Exception as e:   # noqa: BLE001  (every other exception is a finding)
         return "bad", f"load raised {type(e).__name__}: {str(e)[:300]}"
     try:
-        img = np.asarray(pbr.render(scene, spp=1, seed=0, progress=False))
+        img = np.asarray(pbr.render(scene, spp=1, seed=0, progress=False, on_nonfinite="raise"))
     except Exception as e:   # noqa: BLE001
         return "bad", f"render raised {type(e).__name__}: {str(e)[:300]}"
     if not np.all(np.isfinite(img)):
