@@ -39,7 +39,7 @@ RAY_EPSILON = 1500.0 * 2.0 ** -24
 # ----------------------------------------------------------------------------- splatting
 
 class SplatFilm:
-    """An image of contributions splatted at film positions (XYZ sums, float32).
+    """An image of contributions splatted at film positions (XYZ sums, float64).
 
     ``splat(pos, L, wl, active)`` adds the spectrum ``L`` (converted to XYZ with the
     wavelengths' densities, as the camera film does) at film position ``pos`` in
@@ -57,7 +57,10 @@ class SplatFilm:
     def __init__(self, camera, nonfinite: NonFinite | None = None):
         self.width, self.height = camera.film.size
         self.rfilter = camera.film.rfilter
-        self.buf = dr.zeros(mi.Float, self.width * self.height * 3)
+        # Float64 sums: float atomics add in whatever order threads arrive, and float32
+        # sums then differ between runs (by ~1e-7); in float64 that difference is far
+        # below the float32 image's rounding, so the same seed gives the same image.
+        self.buf = dr.zeros(mi.Float64, self.width * self.height * 3)
         self.nonfinite = nonfinite or NonFinite()
 
     def splat(self, pos, L, wl, active):
@@ -89,7 +92,7 @@ class SplatFilm:
                 wgt = wx[i] * wy[j] * inv
                 idx = mi.UInt32(iy * w + ix) * 3
                 for c in range(3):
-                    dr.scatter_reduce(dr.ReduceOp.Add, self.buf, xyz[c] * wgt, idx + c, ok)
+                    dr.scatter_reduce(dr.ReduceOp.Add, self.buf, mi.Float64(xyz[c] * wgt), idx + c, ok)
 
     def develop(self, scale: float) -> np.ndarray:
         xyz = np.array(self.buf, dtype=np.float64).reshape(self.height, self.width, 3) * scale

@@ -374,7 +374,7 @@ class SPPMIntegrator(SamplingIntegrator):
     # -- 3. photon pass ------------------------------------------------------------------------
     def _photon_flux(self, scene, vp, state, wl, it, n_photons, seed, n_pix):
         """(per-pixel spectral flux sum_photons beta f, photon count M) of one iteration."""
-        phi = dr.zeros(mi.Float, 4 * n_pix)
+        phi = dr.zeros(mi.Float64, 4 * n_pix)     # float64: run-to-run equal sums (see SplatFilm)
         m = dr.zeros(mi.Float, n_pix)
         if not scene.lights.entries or self.max_bounces < 2:
             return phi, m
@@ -456,7 +456,7 @@ class SPPMIntegrator(SamplingIntegrator):
                 both = near & terminated & dr.gather(mi.Bool, vp.terminated, v, near)
                 flux[both] = flux * (1.0 / spec.N_WAVELENGTHS)
             for c in range(4):
-                dr.scatter_reduce(dr.ReduceOp.Add, phi, flux[c], v * 4 + c, near)
+                dr.scatter_reduce(dr.ReduceOp.Add, phi, mi.Float64(flux[c]), v * 4 + c, near)
             dr.scatter_reduce(dr.ReduceOp.Add, m, 1.0, v, near)
             i += 1
 
@@ -469,7 +469,8 @@ class SPPMIntegrator(SamplingIntegrator):
     def _update(self, state, vp, phi, m, wl):
         """Hachisuka & Jensen's update with gamma = ``GAMMA``: keep a fraction gamma of the
         new photons, shrink the radius to hold the density, rescale the flux."""
-        flux = mi.Spectrum(*[dr.gather(mi.Float, phi, dr.arange(mi.UInt32, dr.width(m)) * 4 + c) for c in range(4)])
+        flux = mi.Spectrum(*[mi.Float(dr.gather(mi.Float64, phi, dr.arange(mi.UInt32, dr.width(m)) * 4 + c))
+                             for c in range(4)])
         has = m > 0
         xyz, = self.counter().replace([spec.to_xyz(vp.beta * flux, wl)], has)
         n_new = state.N + self.GAMMA * m
