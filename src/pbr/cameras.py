@@ -22,10 +22,15 @@ SENSORS = Registry("sensor")
 
 
 def _x_fov(props: Props, aspect: float) -> float:
-    if props.has("focal_length"):
-        if props.has("fov"):
-            raise props.error("fov", "give either 'fov' or 'focal_length', not both")
-        fl = props.raw("focal_length")
+    """Horizontal field of view (degrees) from ``fov``/``fov_axis`` or ``focal_length``
+    (a 35 mm equivalent: the diagonal of a 36 x 24 mm film); neither: Mitsuba's default
+    focal length, 50 mm."""
+    if props.has("fov") and props.has("focal_length"):
+        raise props.error("fov", "give either 'fov' or 'focal_length', not both")
+    if not props.has("fov"):
+        if props.has("fov_axis"):
+            raise props.error("fov_axis", "fov_axis needs 'fov'")
+        fl = props.raw("focal_length", "50mm")
         try:
             f = float(str(fl).rstrip("m").rstrip("m")) if isinstance(fl, str) else float(fl)
         except ValueError:
@@ -57,7 +62,7 @@ class PerspectiveCamera:
     ========================  =========  ========  ==================================================
     fov                       float      -         field of view (degrees) along fov_axis
     fov_axis                  string     'x'       'x', 'y', 'diagonal', 'smaller' or 'larger'
-    focal_length              string     -         instead of fov: a 35 mm equivalent, e.g. '50mm'
+    focal_length              string     '50mm'    without fov: a 35 mm equivalent (Mitsuba's default)
     to_world                  transform  identity  camera-to-world (rigid; the camera looks down +z)
     near_clip                 float      0.01      near clip distance
     far_clip                  float      10000     far clip distance
