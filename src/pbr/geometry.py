@@ -2,7 +2,10 @@
 
 pbr hands its shapes to Mitsuba (``optimize=False`` keeps one Mitsuba shape per pbr
 shape) and uses only intersection, surface-interaction and shape-sampling queries.
-Meshes from files are read with trimesh and given to Mitsuba as ``mi.Mesh`` objects.
+OBJ and serialized meshes are read by Mitsuba's own loaders (so that vertices split per
+distinct position/uv/normal corner, normals and uv flips are exactly Mitsuba's); PLY
+files are read with trimesh (their attributes hold the file's values); both become
+``mi.Mesh`` objects.
 
 A hit is mapped to pbr's shape (which indexes pbr's material, light and medium tables)
 through the hit's shape pointer, which both ray tracers fill in: in Mitsuba's JIT
@@ -35,12 +38,14 @@ SHAPE_PARAMS = {
     "cylinder": ("to_world", "flip_normals", "p0", "p1", "radius"),
     "obj": ("to_world", "flip_normals", "filename", "face_normals", "flip_tex_coords"),
     "ply": ("to_world", "flip_normals", "filename", "face_normals", "flip_tex_coords"),
+    # Mitsuba's compressed mesh format (zlib-deflated streams, several meshes per file).
+    "serialized": ("to_world", "flip_normals", "filename", "face_normals", "shape_index"),
     # Mitsuba's curves (round tubes; a text file of "x y z radius" lines, a blank line
     # between curves). Their shading frame has s around the tube and t along it.
     "bsplinecurve": ("to_world", "filename"),
     "linearcurve": ("to_world", "filename"),
 }
-MESH_FILES = ("obj", "ply")
+MESH_FILES = ("obj", "ply", "serialized")
 CURVE_FILES = ("bsplinecurve", "linearcurve")
 
 
@@ -48,12 +53,59 @@ def _to_mi_transform(m: np.ndarray):
     return mi.ScalarTransform4f(m.astype(np.float64))
 
 
+def _mitsuba_mesh(props: Props, path: str) -> "mi.Mesh":
+    """An OBJ or serialized mesh read by Mitsuba's own loader, in world space. OBJ vertex
+    colours (``v x y z r g b``, which Mitsuba ignores) become ``vertex_color``."""
+    to_world = props.transform("to_world")
+    d = {"type": props.type, "filename": path, "face_normals": props.bool("face_normals", False),
+         "flip_normals": props.bool("flip_normals", False), "to_world": _to_mi_transform(to_world)}
+    if props.type == "obj":
+        d["flip_tex_coords"] = props.bool("flip_tex_coords", True)
+    else:
+        d["shape_index"] = props.int("shape_index", 0, min=0)
+    try:
+        mesh = mi.load_dict(d)
+    except Exception as e:
+        raise props.error("filename", f"cannot read mesh {path!r}: {str(e).strip().splitlines()[-1]}") from None
+    if props.type == "obj":
+        attach(mesh, _obj_vertex_colours(mesh, path, d, props))
+    return mesh
+
+
+def _obj_vertex_colours(mesh, path: str, d: dict, props: Props) -> dict:
+    """``vertex_color`` of the vertices of ``mesh`` (Mitsuba's OBJ mesh) from an OBJ file's
+    ``v x y z r g b`` lines, or nothing. Mitsuba splits a file vertex into one vertex per
+    distinct corner; each is matched to its file vertex by position (read without
+    ``to_world``)."""
+    with open(path, "rb") as f:
+        if not any(line.startswith(b"v ") and len(line.split()) >= 7 for line in f):
+            return {}
+    import trimesh
+    try:
+        tmesh = trimesh.load(path, process=False, maintain_order=True, force="mesh")
+    except Exception as e:
+        raise props.error("filename", f"cannot read mesh {path!r}: {e}") from None
+    colours = file_attributes(tmesh, "obj", props.key("filename")).get("vertex_color")
+    if colours is None:
+        return {}
+    plain = mi.load_dict({**d, "to_world": mi.ScalarTransform4f(), "flip_normals": False})
+    pos = np.array(mi.traverse(plain)["vertex_positions"], dtype=np.float32).reshape(-1, 3)
+    index = {tuple(v): i for i, v in enumerate(np.asarray(tmesh.vertices, dtype=np.float32))}
+    rows = [index.get(tuple(v)) for v in pos]
+    if len(pos) != mesh.vertex_count() or any(r is None for r in rows):
+        raise props.error("filename", f"{path!r}: cannot match the OBJ vertex colours to Mitsuba's vertices")
+    return {"vertex_color": colours[rows]}
+
+
 def load_mesh_file(props: Props, path: str) -> "mi.Mesh":
-    """Read an .obj/.ply file with trimesh into an ``mi.Mesh`` in world space.
+    """Read a mesh file into an ``mi.Mesh`` in world space: OBJ and serialized files with
+    Mitsuba's loaders, PLY files with trimesh.
 
     Conventions follow Mitsuba's own loaders: OBJ texture coordinates are flipped
     vertically (``flip_tex_coords``, default true); missing vertex normals are
     recomputed (smooth) unless ``face_normals`` is true."""
+    if props.type in ("obj", "serialized"):
+        return _mitsuba_mesh(props, path)
     import trimesh
     to_world = props.transform("to_world")
     face_normals = props.bool("face_normals", False)
