@@ -2,8 +2,11 @@
 
 The complex IOR eta + i k is given per wavelength: ``material`` names a measured metal
 (Mitsuba's data files ``data/ior/<name>.{eta,k}.spd``, e.g. Au, Ag, Al, Cu, Cr; 'none'
-is a perfect mirror), or ``eta``/``k`` are given as spectra (rgb values use the unbounded
-upsampling). ``specular_reflectance`` scales the result (not physical; default 1).
+is a perfect mirror), or ``eta``/``k`` are given as spectra. RGB values are upsampled as
+Mitsuba's spectral variants do: clamped to [0, 1] and upsampled as a reflectance (so an
+RGB ``k`` of 3 acts as 1); ``{'type': 'rgb', 'value': ..., 'upsampling': 'unbounded'}``
+selects pbrt-v4's unbounded upsampling, which keeps values above 1 (docs/materials.md).
+``specular_reflectance`` scales the result (not physical; default 1).
 """
 
 from __future__ import annotations
@@ -35,8 +38,9 @@ def _load_eta_k(loader, props):
     if has_ek:
         if props.has("material"):
             raise props.error("material", "give either 'material' or 'eta'/'k', not both")
-        eta = load_spectrum(loader, props.raw("eta", 0.0), props.key("eta"), emitter=False, unbounded=True)
-        k = load_spectrum(loader, props.raw("k", 1.0), props.key("k"), emitter=False, unbounded=True)
+        # Mitsuba's unbounded textures: RGB values are clamped to [0, 1] (see textures._rgb).
+        eta = load_spectrum(loader, props.raw("eta", 0.0), props.key("eta"), emitter=False, unbounded="mitsuba")
+        k = load_spectrum(loader, props.raw("k", 1.0), props.key("k"), emitter=False, unbounded="mitsuba")
         return eta, k
     if material == "none":
         return (load_spectrum(loader, 0.0, props.key("eta"), emitter=False),
@@ -123,11 +127,12 @@ class RoughConductor(Conductor):
         au = props.raw("alpha_u", props.raw("alpha", 0.1))
         av = props.raw("alpha_v", props.raw("alpha", 0.1) if not props.has("alpha_u") else au)
         anisotropic = props.has("alpha_u") or props.has("alpha_v")
-        au = load_spectrum(loader, au, props.key("alpha_u" if props.has("alpha_u") else "alpha"), emitter=False)
+        au = load_spectrum(loader, au, props.key("alpha_u" if props.has("alpha_u") else "alpha"), emitter=False,
+                           unbounded="mitsuba", scalar=True)
         # Isotropic: one slot for both directions, so that the parameter <bsdf>.alpha
         # moves both (two slots under one key left alpha_v at its loaded value).
-        av = (load_spectrum(loader, av, props.key("alpha_v" if props.has("alpha_v") else "alpha"), emitter=False)
-              if anisotropic else au)
+        av = (load_spectrum(loader, av, props.key("alpha_v" if props.has("alpha_v") else "alpha"), emitter=False,
+                            unbounded="mitsuba", scalar=True) if anisotropic else au)
         # Visible-normal sampling exists for GGX only (see Microfacet).
         visible = props.bool("sample_visible", True) and dist == GGX
         i = super().add(loader, props)

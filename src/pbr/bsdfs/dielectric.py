@@ -336,7 +336,7 @@ class RoughDielectric(_Dielectric):
             v = props.raw(k, 0.1)
             if isinstance(v, numbers.Real) and not isinstance(v, bool) and v < 0:
                 raise props.error(k, f"roughness must be >= 0, got {v}")
-            slots.append(load_spectrum(loader, v, props.key(k), emitter=False, unbounded=True))
+            slots.append(load_spectrum(loader, v, props.key(k), emitter=False, unbounded="mitsuba", scalar=True))
         inst["alpha"] = (slots[0], slots[-1])
         self._add_common(loader, props, inst)
         props.finish()
