@@ -183,6 +183,9 @@ def run_scene(path: str, spp: int | None = None, out: str | None = None, budget:
 
 
 def _message(e: Exception) -> str:
+    """The first line of the innermost cause (Dr.Jit's loops wrap errors: "see above")."""
+    while e.__cause__ is not None:
+        e = e.__cause__
     lines = str(e).strip().splitlines() or [type(e).__name__]
     return f"{type(e).__name__}: {lines[0]}"
 

@@ -213,6 +213,11 @@ class BSDFSet:
         null = [t == "null" and i not in self.blend_of for i, (t, _, _, _) in enumerate(self.entries)]
         self.null_of = mi.Bool(null)
         self.has_null = any(null)
+        # Plain entries of families with a null lobe (thindielectric): see null_transmission.
+        lobe = [self.families[t].null_lobe and i not in self.blend_of and i not in self.perturb_of
+                and b == NO_BACK and o == NO_BACK for i, (t, _, b, o) in enumerate(self.entries)]
+        self.null_lobe_of = mi.Bool(lobe)
+        self.has_null_lobes = any(lobe)
 
     def smooth(self, bsdf_id, active):
         """True where the entry has a non-delta lobe (worth sampling a light for)."""
@@ -232,6 +237,29 @@ class BSDFSet:
         if not self.has_null:
             return mi.Bool(False)
         return dr.gather(mi.Bool, self.null_of, bsdf_id, active)
+
+    def has_null_lobe(self, bsdf_id, active):
+        """True where the entry has a lobe passing light straight on (Mitsuba's Null flag,
+        e.g. ``thindielectric``'s transmission)."""
+        if not self.has_null_lobes:
+            return mi.Bool(False)
+        return dr.gather(mi.Bool, self.null_lobe_of, bsdf_id, active)
+
+    def null_transmission(self, bsdf_id, ctx, active):
+        """Weight of light passing entry ``bsdf_id`` straight on (``ctx.si.wi``: the local
+        direction it arrives from): 1 for ``null``, the null lobe's weight for entries
+        with one (Mitsuba's ``eval_null_transmission``), 0 elsewhere."""
+        out = dr.select(self.is_null(bsdf_id, active), mi.Spectrum(1.0), mi.Spectrum(0.0))
+        if not self.has_null_lobes:
+            return out
+        lanes = active & self.has_null_lobe(bsdf_id, active)
+        local = dr.gather(mi.UInt32, self.local_of, bsdf_id, lanes)
+        fam_of = dr.gather(mi.UInt32, self.family_of, bsdf_id, lanes)
+        for t, fam in self.families.items():
+            if fam.null_lobe:
+                on = lanes & (fam_of == self.order.index(t))
+                out = dr.select(on, fam.null_transmission(ctx, local, on), out)
+        return out
 
     @property
     def dispersive(self) -> bool:
@@ -465,7 +493,7 @@ def _cast(v):
     spectra as ``mi.Spectrum``, densities as ``mi.Float``."""
     if isinstance(v, BSDFSample):
         return BSDFSample(mi.Vector3f(v.wo), mi.Float(v.pdf), mi.Float(v.eta), mi.Bool(v.delta),
-                          mi.Spectrum(v.weight), mi.Bool(v.terminate))
+                          mi.Spectrum(v.weight), mi.Bool(v.terminate), mi.Bool(v.null))
     if isinstance(v, tuple):
         return tuple(_cast(x) for x in v)
     if dr.size_v(v) == 4:

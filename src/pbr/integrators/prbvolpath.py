@@ -176,7 +176,7 @@ class PRBVolPathIntegrator(_MediumAware):
         """(transmittance from ``sray.o`` to ``p_light``, forward derivative)."""
         state = (mi.Spectrum(1.0), mi.UInt32(0), dL_fwd)
         T, _, dL_fwd = volume.transmittance(scene, sray, p_light, medium, active, state, self._shadow_segment,
-                                            (scene.media, wl, rng, mode, dL, adj))
+                                            (scene.media, wl, rng, mode, dL, adj), wl=wl)
         return T, dL_fwd
 
     # -- the estimator --------------------------------------------------------------------
@@ -233,6 +233,13 @@ class PRBVolPathIntegrator(_MediumAware):
             bsdf_id, skip, real, at_vertex, go_on, sc, rs = volume.classify(
                 scene, shape, surf, scattered, skip, depth, max_depth)
             valid |= at_vertex
+            rs_sample = rs
+            lobe = mi.Bool(False)
+            if bsdfs.has_null_lobes:
+                # A null lobe (thindielectric's transmission) is no bounce (Mitsuba's
+                # volumetric integrators): such surfaces are sampled at the depth limit too.
+                lobe = real & bsdfs.has_null_lobe(bsdf_id, real) & (depth < max_depth)
+                rs_sample = rs | lobe
 
             # -- next-event estimation ---------------------------------------------------------
             ctx = ShadingContext(si, wl)
@@ -245,7 +252,7 @@ class PRBVolPathIntegrator(_MediumAware):
             with dr.resume_grad(when=not primal):
                 ls = lights.sample_Li(self.light_sampler, ref, u_light, u_pos, wl, nee)
                 wo_em = si.to_local(ls.wi)
-                f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs)
+                f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs_sample)
                 if has_media:
                     f_em, pdf_em = volume.phase_nee(media, medium, ray, ls.wi, sc, f_em, pdf_em)
                 w_em = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf, dr.detach(pdf_em)))
@@ -269,6 +276,16 @@ class PRBVolPathIntegrator(_MediumAware):
 
             # -- continue: BSDF or phase function sampling ----------------------------------------
             wi_next, pdf_next, w_next, delta_next = volume.sample_direction(media, medium, ray, si, bs, sc, rng)
+            if bsdfs.has_null_lobes:
+                # Crossed by the null lobe: on as through a null surface (no vertex, the
+                # MIS state of the last vertex kept), weighted by the lobe (its weight's
+                # derivative, from specular_transmittance only, is not propagated).
+                crossed = lobe & bs.null & (bs.pdf > 0)
+                beta[crossed] = beta * bs.weight
+                go_on &= ~crossed
+                rs &= ~crossed
+                at_vertex &= ~crossed
+                skip |= crossed
             cont = go_on & (pdf_next > 0)
             if not primal:
                 with dr.resume_grad():

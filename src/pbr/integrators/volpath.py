@@ -226,6 +226,13 @@ class VolPathIntegrator(_MediumAware):
             bsdf_id, skip, real, at_vertex, go_on, sc, rs = volume.classify(
                 scene, shape, surf, scattered, skip, depth, max_depth)
             valid |= at_vertex
+            rs_sample = rs
+            lobe = mi.Bool(False)
+            if bsdfs.has_null_lobes:
+                # A null lobe (thindielectric's transmission) is no bounce (Mitsuba's
+                # volpath): such surfaces are sampled at the depth limit too.
+                lobe = real & bsdfs.has_null_lobe(bsdf_id, real) & (depth < max_depth)
+                rs_sample = rs | lobe
 
             # -- next-event estimation from the vertex (surface or medium point) ----------
             ctx = ShadingContext(si, wl)
@@ -239,13 +246,13 @@ class VolPathIntegrator(_MediumAware):
             wo_em = si.to_local(ls.wi)
             u1 = rng.next_float32()
             u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
-            f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs)
+            f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs_sample)
             if has_media:
                 f_em, pdf_em = volume.phase_nee(media, medium, ray, ls.wi, sc, f_em, pdf_em)
             sray, s_med = volume.shadow_ray(scene, shape, si, ls, sc, p_sc, medium, nee & rs)
             T_ray, tr_u, tr_l, n_shadow = volume.transmittance(
                 scene, sray, ls.p, s_med, nee, (mi.Spectrum(1.0), mi.Spectrum(1.0), mi.Spectrum(1.0), mi.UInt32(0)),
-                self._shadow_segment, (media, rng, wl))
+                self._shadow_segment, (media, rng, wl), wl=wl)
             rl_nee = r_u * ls.pdf * tr_l
             ru_nee = r_u * pdf_em * tr_u
             d_nee = dr.select(ls.delta, dr.mean(rl_nee), dr.mean(rl_nee + ru_nee))
@@ -253,6 +260,15 @@ class VolPathIntegrator(_MediumAware):
 
             # -- continue: sample the BSDF or the phase function -------------------------
             wi_next, pdf_next, w_next, delta_next = volume.sample_direction(media, medium, ray, si, bs, sc, rng)
+            if bsdfs.has_null_lobes:
+                # Crossed by the null lobe: on as through a null surface (no vertex, the
+                # MIS state of the last vertex kept), weighted by the lobe.
+                crossed = lobe & bs.null & (bs.pdf > 0)
+                beta[crossed] = beta * bs.weight
+                go_on &= ~crossed
+                rs &= ~crossed
+                at_vertex &= ~crossed
+                skip |= crossed
             cont = go_on & (pdf_next > 0)
             if bsdfs.dispersive:
                 term = rs & bs.terminate & ~terminated
