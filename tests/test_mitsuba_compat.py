@@ -294,3 +294,19 @@ def test_heterogeneous_medium_fills_its_volume_box(sigma_t):
                      "bsdf": {"type": "null"}, "interior": {"type": "ref", "id": "smoke"}}
     res = _vs_mitsuba(d, d)
     assert res.passed, res.summary()
+
+
+def test_load_file_before_set_backend(tmp_path):
+    """``pbr.load_file`` works as the first call of a script: the XML reader builds
+    Mitsuba transforms, which need a variant (it raised Mitsuba's "Cannot access
+    'ScalarTransform4f' before setting a variant")."""
+    import os
+    import subprocess
+    import sys
+    xml = tmp_path / "s.xml"
+    xml.write_text('<scene version="3.0.0"><shape type="sphere"><transform name="to_world">'
+                   '<translate x="1"/></transform></shape></scene>')
+    code = f"import pbr; print(pbr.load_file({str(xml)!r}))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
+    assert out.returncode == 0 and "pbr.Scene(1 shapes" in out.stdout, out.stderr[-2000:]

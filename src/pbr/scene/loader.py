@@ -229,5 +229,6 @@ def load_file(path: str, **kwargs) -> Scene:
     ext = os.path.splitext(path)[1].lower()
     if ext != ".xml":
         raise SceneError(f"{path}: unsupported scene format {ext!r} (supported: .xml)")
+    backend.ensure()   # the XML reader builds Mitsuba transforms: a variant must be set
     d = parse_file(path, **kwargs)
     return load_dict(d, base_dir=os.path.dirname(os.path.abspath(path)))
