@@ -310,3 +310,48 @@ def test_load_file_before_set_backend(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
                          env={**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)})
     assert out.returncode == 0 and "pbr.Scene(1 shapes" in out.stdout, out.stderr[-2000:]
+
+
+# ------------------------------------------------------------------ instancing
+
+def _instanced_box():
+    from mitsuba_scenes import material_box
+    T = mi.ScalarTransform4f
+    d = material_box({"type": "diffuse"})
+    del d["small-box"], d["large-box"]
+    d["group"] = {"type": "shapegroup",
+                  "ball": {"type": "sphere", "radius": 0.15, "center": [0.0, 0.15, 0.0],
+                           "bsdf": {"type": "diffuse", "reflectance": _rgb([0.8, 0.2, 0.1])}},
+                  "plate": {"type": "rectangle", "to_world": T().rotate([1, 0, 0], -90).scale(0.25),
+                            "bsdf": {"type": "roughconductor", "material": "Au", "alpha": 0.2}}}
+    for i, (x, z, a) in enumerate([(-0.5, -0.2, 0), (0.1, 0.3, 30), (0.5, -0.4, -60)]):
+        d[f"copy{i}"] = {"type": "instance", "shapegroup": {"type": "ref", "id": "group"},
+                         "to_world": T().translate([x, -0.7 + 0.3 * i, z]).rotate([0, 1, 0], a).scale(1 + 0.3 * i)}
+    return d
+
+
+def test_instances_match_mitsuba():
+    """``shapegroup``/``instance``: each instance shows the group's shapes with their own
+    BSDFs, moved by its ``to_world`` (a hit on an instance resolves to the group's shape:
+    the preliminary intersection's shape pointer is empty there)."""
+    d = _instanced_box()
+    res = _vs_mitsuba(d, d)
+    assert res.passed, res.summary()
+    scene = pbr.load_dict(d)
+    assert len(scene.mi_scene.shapes()) == 5 + 1 + 3   # walls, light, instances
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda d: d["group"]["ball"].update(emitter={"type": "area", "radiance": 1.0}),
+     r"scene\.group\.ball\.emitter: shapes inside a shapegroup cannot carry emitters"),
+    (lambda d: d["group"].update(inner={"type": "shapegroup"}),
+     r"scene\.group\.inner: a shapegroup cannot contain a 'shapegroup'"),
+    (lambda d: d["copy0"].update(shapegroup={"type": "ref", "id": "light"}),
+     r"scene\.copy0\.shapegroup: an instance refers to a shapegroup, 'light' is a 'rectangle'"),
+    (lambda d: d["copy0"].pop("shapegroup"), r"scene\.copy0: an instance needs exactly one shapegroup reference"),
+])
+def test_instancing_errors(edit, match):
+    d = _instanced_box()
+    edit(d)
+    with pytest.raises(SceneError, match=match):
+        pbr.load_dict(d)
