@@ -172,11 +172,23 @@ class PRBVolPathIntegrator(_MediumAware):
         T[grid] = T * volume.hero_ratio(T_acc)
         return T, n_null, dL_fwd
 
+    def _null_crossing(self, state, w, lanes, mode, dL, adj):
+        """A shadow ray crosses a null lobe (a thin dielectric) with weight ``w``
+        (attached in the adjoint modes: its derivative times ``adj`` is propagated)."""
+        T, n_null, dL_fwd = state
+        if mode != PRIMAL:
+            with dr.resume_grad():
+                f = _ratio(w)
+            dL_fwd = self._propagate(mode, dL, lanes, adj, f, dL_fwd)
+        T[lanes] = T * dr.detach(w)
+        return T, n_null, dL_fwd
+
     def _transmittance(self, scene, rng, sray, p_light, medium, wl, mode, dL, adj, dL_fwd, active):
         """(transmittance from ``sray.o`` to ``p_light``, forward derivative)."""
         state = (mi.Spectrum(1.0), mi.UInt32(0), dL_fwd)
         T, _, dL_fwd = volume.transmittance(scene, sray, p_light, medium, active, state, self._shadow_segment,
-                                            (scene.media, wl, rng, mode, dL, adj), wl=wl)
+                                            (scene.media, wl, rng, mode, dL, adj), wl=wl,
+                                            crossing=self._null_crossing, crossing_args=(mode, dL, adj))
         return T, dL_fwd
 
     # -- the estimator --------------------------------------------------------------------
@@ -235,6 +247,7 @@ class PRBVolPathIntegrator(_MediumAware):
             valid |= at_vertex
             rs_sample = rs
             lobe = mi.Bool(False)
+            crossed = mi.Bool(False)
             if bsdfs.has_null_lobes:
                 # A null lobe (thindielectric's transmission) is no bounce (Mitsuba's
                 # volumetric integrators): such surfaces are sampled at the depth limit too.
@@ -293,7 +306,9 @@ class PRBVolPathIntegrator(_MediumAware):
                     f_bs = dr.select(replay_sample, f_sampled, f_bs)
                     f_det = bs.weight * bs.pdf
                     ratio = dr.select(f_det != 0, f_bs * dr.rcp(dr.detach(f_det)), 0.0)
-                    Lr = dr.select(rs & cont, L * dr.replace_grad(mi.Spectrum(1.0), ratio), 0.0)
+                    # (lanes that crossed a null lobe: the lobe's weight times its choice
+                    # probability, as for the delta lobes)
+                    Lr = dr.select((rs & cont) | crossed, L * dr.replace_grad(mi.Spectrum(1.0), ratio), 0.0)
                     # One traversal for the light sample and the continuation: they share
                     # the BSDF query's graph (f_em and f_sampled), which a first traversal
                     # would clear.

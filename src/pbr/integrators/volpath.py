@@ -110,16 +110,22 @@ class VolPathIntegrator(_MediumAware):
             r_e = r_u * sigma_maj * T_acc * dr.rcp(pdf_e)
             L[em] = L + beta * T_acc * dr.rcp(pdf_e) * mp.sigma_a * mp.Le * dr.rcp(dr.mean(r_e))
         u_ev = rng.next_float32()
-        p_abs = mp.sigma_a[0] * dr.rcp(s0)
-        p_sca = mp.sigma_s[0] * dr.rcp(s0)
+        # Where sigma_s exceeds sigma_t (an albedo above 1, which Mitsuba's RGB albedo
+        # grids have at some wavelengths: its volpath weights scattering by the albedo),
+        # every real collision scatters: probability sigma_t (not sigma_s), weight
+        # sigma_s / sigma_t; per wavelength, so that the spectral MIS stays consistent.
+        gain = mp.sigma_a < 0.0
+        p_real = mi.Spectrum(dr.select(gain, mp.sigma_a + mp.sigma_s, mp.sigma_s))
+        p_abs = dr.maximum(mp.sigma_a[0], 0.0) * dr.rcp(s0)
+        p_sca = p_real[0] * dr.rcp(s0)
         is_abs = coll & (u_ev < p_abs)
         is_sca = coll & ~is_abs & (u_ev < p_abs + p_sca)
         is_null = coll & ~is_abs & ~is_sca
-        # Real scattering: beta and r_u by T sigma_s / pdf.
-        pdf_s = T_acc[0] * mp.sigma_s[0]
-        w_s = T_acc * mp.sigma_s * dr.select(pdf_s > 0, dr.rcp(pdf_s), 0.0)
-        beta[is_sca] = beta * w_s
-        r_u[is_sca] = r_u * w_s
+        # Real scattering: beta by T sigma_s / pdf, r_u by each wavelength's own pdf.
+        pdf_s = T_acc[0] * p_real[0]
+        inv_s = dr.select(pdf_s > 0, dr.rcp(pdf_s), 0.0)
+        beta[is_sca] = beta * T_acc * mp.sigma_s * inv_s
+        r_u[is_sca] = r_u * T_acc * p_real * inv_s
         p_sc[is_sca] = c.p
         # Null scattering: continue, reweighting every wavelength.
         sigma_n = dr.maximum(sigma_maj - mp.sigma_a - mp.sigma_s, 0.0)
