@@ -1,7 +1,8 @@
 """Mitsuba 3's own render-test suite, rendered by pbr and judged as Mitsuba judges it.
 
 The suite is the 41 scenes under ``tests/scenes`` of the public ``mitsuba-renderer/mitsuba-data``
-repository (with ``common/``, the meshes and textures they share), each with a spectral
+repository (with ``common/``, the meshes and textures they share; ``various_shapes`` also
+reads ``tests/obj``, ``tests/ply``, ``tests/serialized`` and ``docs/scenes/sdfgrid``), each with a spectral
 reference image ``refs/<name>_ref_spectral.exr`` and the per-sample variance of that
 reference, ``refs/<name>_ref_spectral_var.exr`` (both linear sRGB). Mitsuba's
 ``src/render/tests/test_renders.py`` judges a render as follows, and so does this runner:
