@@ -113,7 +113,7 @@ class RoughConductor(Conductor):
     specular_reflectance  texture  1         factor on the reflection (not physical; Mitsuba's)
     distribution          string   beckmann  microfacet distribution: 'beckmann' or 'ggx'
     alpha                 texture  0.1       roughness (RMS slope), or anisotropic alpha_u / alpha_v
-    sample_visible        bool     true      sample visible normals (GGX; Beckmann samples D cos)
+    sample_visible        bool     true      sample visible normals (else D(m) cos(theta_m))
     ====================  =======  ========  =======================================================
     """
 
@@ -133,8 +133,7 @@ class RoughConductor(Conductor):
         # moves both (two slots under one key left alpha_v at its loaded value).
         av = (load_spectrum(loader, av, props.key("alpha_v" if props.has("alpha_v") else "alpha"), emitter=False,
                             unbounded="mitsuba", scalar=True) if anisotropic else au)
-        # Visible-normal sampling exists for GGX only (see Microfacet).
-        visible = props.bool("sample_visible", True) and dist == GGX
+        visible = props.bool("sample_visible", True)
         i = super().add(loader, props)
         self.instances[i] = self.instances[i] + (au, av, (dist, visible))
         return i

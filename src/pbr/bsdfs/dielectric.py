@@ -318,7 +318,7 @@ class RoughDielectric(_Dielectric):
     specular_transmittance  texture    1         factor on the transmitted lobe
     distribution            string     beckmann  microfacet distribution: 'beckmann' or 'ggx'
     alpha                   texture    0.1       roughness (RMS slope), or anisotropic alpha_u / alpha_v
-    sample_visible          bool       true      sample visible normals (GGX; Beckmann samples D cos)
+    sample_visible          bool       true      sample visible normals (else D(m) cos(theta_m))
     ======================  =========  ========  =========================================================
     """
 
@@ -332,9 +332,7 @@ class RoughDielectric(_Dielectric):
         if dist not in (BECKMANN, GGX):
             raise props.error("distribution", f"expected 'beckmann' or 'ggx', got {dist!r}")
         visible = props.bool("sample_visible", True)
-        # Visible-normal sampling is implemented for GGX; Beckmann samples D cos (the
-        # same expectation as Mitsuba's visible Beckmann sampling, more variance).
-        inst["variant"] = (dist, visible and dist == GGX)
+        inst["variant"] = (dist, visible)
         if props.has("alpha_u") or props.has("alpha_v"):
             for k in ("alpha_u", "alpha_v"):
                 if not props.has(k):
