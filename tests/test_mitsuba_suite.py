@@ -83,7 +83,9 @@ def test_variance_floor_and_nonfinite():
 @pytest.mark.skipif(not DATA, reason="PBR_MITSUBA_DATA (a mitsuba-data checkout) not set")
 @pytest.mark.parametrize("scene", ["spot_light/test_spot_direct.xml",
                                    "bsdf_spheres/test_textured_roughconductor_path.xml",
-                                   "bsdf_spheres/test_texturedprincipled1_path.xml"])
+                                   "bsdf_spheres/test_texturedprincipled1_path.xml",
+                                   "instancing/test_instancing_path.xml",
+                                   "orthographic_sensor/test_orthographic_path.xml"])
 def test_real_scene(scene):
     """A scene of Mitsuba's suite loads unmodified and passes Mitsuba's criterion; with
     its reference scaled by 1.1 it fails."""
