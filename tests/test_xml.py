@@ -286,9 +286,47 @@ def test_include(tmp_path):
     assert len(s1.shapes()) == len(s2.shapes()) == 4
     assert np.allclose(np.array(s1.bbox().max), np.array(s2.bbox().max))
     assert np.allclose(np.array(s1.bbox().max), [5, 5, 3])
-    # ... but the included file's own directory comes first
+    # ... also when the included file's own directory has one: Mitsuba looks filenames
+    # up in the main file's search path (it resolves them when it builds the plugins)
     (tmp_path / "sub" / "top.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    assert parse_file(path)["m"]["filename"] == str(tmp_path / "top.obj")
+    assert np.allclose(np.array(mi.load_file(path).bbox().max), [5, 5, 3])
+    # pbr's fallback where Mitsuba finds nothing: the directory of the file it is named in
+    (tmp_path / "top.obj").unlink()
     assert parse_file(path)["m"]["filename"] == str(tmp_path / "sub" / "top.obj")
+
+
+def test_search_path(tmp_path):
+    """<path> and includes resolve like Mitsuba's file resolver (Mitsuba's test scenes
+    use both: <path value="../../../common"/>, and an included file that includes
+    "include/preamble.xml" relative to the main file's directory)."""
+    tri = "v 0 0 0\nv {s} 0 0\nv 0 {s} 0\nf 1 2 3\n"
+    (tmp_path / "common" / "meshes").mkdir(parents=True)
+    (tmp_path / "common" / "meshes" / "m.obj").write_text(tri.format(s=2))
+    (tmp_path / "scenes" / "inc").mkdir(parents=True)
+    (tmp_path / "scenes" / "inc" / "pre.xml").write_text(
+        scene_xml('<shape type="obj" id="pre"><string name="filename" value="meshes/m.obj"/></shape>'))
+    (tmp_path / "scenes" / "inc" / "base.xml").write_text(scene_xml('<include filename="inc/pre.xml"/>'))
+    # a <path> inside an included file only serves that file's own includes
+    (tmp_path / "local").mkdir()
+    (tmp_path / "local" / "meshes").mkdir()
+    (tmp_path / "local" / "meshes" / "m.obj").write_text(tri.format(s=7))
+    (tmp_path / "scenes" / "inc" / "local.xml").write_text(scene_xml('<path value="../../local"/>'))
+    path = write(tmp_path / "scenes", "main.xml", scene_xml("""
+    <path value="../common"/>
+    <include filename="inc/base.xml"/>
+    <include filename="inc/local.xml"/>
+    <shape type="obj" id="main"><string name="filename" value="meshes/m.obj"/></shape>"""))
+    d = parse_file(path)
+    assert d["pre"]["filename"] == d["main"]["filename"] == str(tmp_path / "common" / "meshes" / "m.obj")
+    ours, theirs = mi.load_dict(d), mi.load_file(path)
+    assert len(ours.shapes()) == len(theirs.shapes()) == 2
+    assert np.allclose(np.array(ours.bbox().max), np.array(theirs.bbox().max))
+    assert np.allclose(np.array(ours.bbox().max), [2, 2, 0])
+    with pytest.raises(XMLError, match=r'main.xml:2: <path>: folder "nowhere" not found'):
+        parse_file(write(tmp_path, "main.xml", scene_xml('<path value="nowhere"/>')))
+    with pytest.raises(XMLError, match=r"<path> is only allowed directly inside <scene>"):
+        parse_file(write(tmp_path, "p.xml", scene_xml('<shape type="sphere"><path value="."/></shape>')))
 
 
 # ---------------------------------------------------------------- transforms

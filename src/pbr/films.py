@@ -24,12 +24,19 @@ class HDRFilm:
     ================  ======  =========  ===================================================
     width             int     768        image width (pixels)
     height            int     576        image height (pixels)
+    crop_offset_x     int     0          left column of the crop window
+    crop_offset_y     int     0          top row of the crop window
+    crop_width        int     width      crop window width: the rendered image's width
+    crop_height       int     height     crop window height: the rendered image's height
     pixel_format      string  'rgb'      only 'rgb'
     component_format  string  'float32'  accepted: 'float16', 'float32' (images are float32)
     file_format       string  'openexr'  accepted: 'openexr', 'exr'
-    crop_*            int     -          cropping is not supported (only the full image)
     sample_border     bool    false      only false
     ================  ======  =========  ===================================================
+
+    With a crop window, the camera keeps the full film's view (aspect ratio and field of
+    view) and the image holds the window's pixels only, as in Mitsuba: ``size`` is the
+    window's (crop_width, crop_height), ``full_size`` the film's (width, height).
     """
 
     def __init__(self, props: Props):
@@ -38,12 +45,12 @@ class HDRFilm:
         self.pixel_format = props.string("pixel_format", "rgb", choices=("rgb",))
         props.string("component_format", "float32", choices=("float16", "float32"))
         props.string("file_format", "openexr", choices=("openexr", "exr"))
-        for k in ("crop_offset_x", "crop_offset_y"):
-            if props.int(k, 0) != 0:
-                raise props.error(k, "film cropping is not supported yet")
-        for k, d in (("crop_width", self.width), ("crop_height", self.height)):
-            if props.int(k, d) != d:
-                raise props.error(k, "film cropping is not supported yet")
+        self.crop_offset = (props.int("crop_offset_x", 0, min=0), props.int("crop_offset_y", 0, min=0))
+        self.crop_size = (props.int("crop_width", self.width, min=1), props.int("crop_height", self.height, min=1))
+        for k, o, c, n in (("crop_width", self.crop_offset[0], self.crop_size[0], self.width),
+                           ("crop_height", self.crop_offset[1], self.crop_size[1], self.height)):
+            if o + c > n:
+                raise props.error(k, f"the crop window (offset {o} + size {c}) exceeds the film's {n} pixels")
         if props.bool("sample_border", False):
             raise props.error("sample_border", "sample_border=true is not supported")
         self.rfilter = GaussianFilter(Props({"type": "gaussian"}, props.key("rfilter")))
@@ -57,4 +64,10 @@ class HDRFilm:
 
     @property
     def size(self):
+        """(width, height) of the rendered image: the crop window's."""
+        return self.crop_size
+
+    @property
+    def full_size(self):
+        """(width, height) of the whole film (which sets the camera's view)."""
         return self.width, self.height

@@ -2,7 +2,10 @@
 
 pbr hands its shapes to Mitsuba (``optimize=False`` keeps one Mitsuba shape per pbr
 shape) and uses only intersection, surface-interaction and shape-sampling queries.
-Meshes from files are read with trimesh and given to Mitsuba as ``mi.Mesh`` objects.
+OBJ and serialized meshes are read by Mitsuba's own loaders (so that vertices split per
+distinct position/uv/normal corner, normals and uv flips are exactly Mitsuba's); PLY
+files are read with trimesh (their attributes hold the file's values); both become
+``mi.Mesh`` objects.
 
 A hit is mapped to pbr's shape (which indexes pbr's material, light and medium tables)
 through the hit's shape pointer, which both ray tracers fill in: in Mitsuba's JIT
@@ -35,12 +38,16 @@ SHAPE_PARAMS = {
     "cylinder": ("to_world", "flip_normals", "p0", "p1", "radius"),
     "obj": ("to_world", "flip_normals", "filename", "face_normals", "flip_tex_coords"),
     "ply": ("to_world", "flip_normals", "filename", "face_normals", "flip_tex_coords"),
+    # Mitsuba's compressed mesh format (zlib-deflated streams, several meshes per file).
+    "serialized": ("to_world", "flip_normals", "filename", "face_normals", "shape_index"),
     # Mitsuba's curves (round tubes; a text file of "x y z radius" lines, a blank line
     # between curves). Their shading frame has s around the tube and t along it.
     "bsplinecurve": ("to_world", "filename"),
     "linearcurve": ("to_world", "filename"),
+    # Mitsuba's signed-distance grid (a .vol file of distances on [0, 1]^3).
+    "sdfgrid": ("to_world", "flip_normals", "filename", "normals"),
 }
-MESH_FILES = ("obj", "ply")
+MESH_FILES = ("obj", "ply", "serialized")
 CURVE_FILES = ("bsplinecurve", "linearcurve")
 
 
@@ -48,12 +55,59 @@ def _to_mi_transform(m: np.ndarray):
     return mi.ScalarTransform4f(m.astype(np.float64))
 
 
+def _mitsuba_mesh(props: Props, path: str) -> "mi.Mesh":
+    """An OBJ or serialized mesh read by Mitsuba's own loader, in world space. OBJ vertex
+    colours (``v x y z r g b``, which Mitsuba ignores) become ``vertex_color``."""
+    to_world = props.transform("to_world")
+    d = {"type": props.type, "filename": path, "face_normals": props.bool("face_normals", False),
+         "flip_normals": props.bool("flip_normals", False), "to_world": _to_mi_transform(to_world)}
+    if props.type == "obj":
+        d["flip_tex_coords"] = props.bool("flip_tex_coords", True)
+    else:
+        d["shape_index"] = props.int("shape_index", 0, min=0)
+    try:
+        mesh = mi.load_dict(d)
+    except Exception as e:
+        raise props.error("filename", f"cannot read mesh {path!r}: {str(e).strip().splitlines()[-1]}") from None
+    if props.type == "obj":
+        attach(mesh, _obj_vertex_colours(mesh, path, d, props))
+    return mesh
+
+
+def _obj_vertex_colours(mesh, path: str, d: dict, props: Props) -> dict:
+    """``vertex_color`` of the vertices of ``mesh`` (Mitsuba's OBJ mesh) from an OBJ file's
+    ``v x y z r g b`` lines, or nothing. Mitsuba splits a file vertex into one vertex per
+    distinct corner; each is matched to its file vertex by position (read without
+    ``to_world``)."""
+    with open(path, "rb") as f:
+        if not any(line.startswith(b"v ") and len(line.split()) >= 7 for line in f):
+            return {}
+    import trimesh
+    try:
+        tmesh = trimesh.load(path, process=False, maintain_order=True, force="mesh")
+    except Exception as e:
+        raise props.error("filename", f"cannot read mesh {path!r}: {e}") from None
+    colours = file_attributes(tmesh, "obj", props.key("filename")).get("vertex_color")
+    if colours is None:
+        return {}
+    plain = mi.load_dict({**d, "to_world": mi.ScalarTransform4f(), "flip_normals": False})
+    pos = np.array(mi.traverse(plain)["vertex_positions"], dtype=np.float32).reshape(-1, 3)
+    index = {tuple(v): i for i, v in enumerate(np.asarray(tmesh.vertices, dtype=np.float32))}
+    rows = [index.get(tuple(v)) for v in pos]
+    if len(pos) != mesh.vertex_count() or any(r is None for r in rows):
+        raise props.error("filename", f"{path!r}: cannot match the OBJ vertex colours to Mitsuba's vertices")
+    return {"vertex_color": colours[rows]}
+
+
 def load_mesh_file(props: Props, path: str) -> "mi.Mesh":
-    """Read an .obj/.ply file with trimesh into an ``mi.Mesh`` in world space.
+    """Read a mesh file into an ``mi.Mesh`` in world space: OBJ and serialized files with
+    Mitsuba's loaders, PLY files with trimesh.
 
     Conventions follow Mitsuba's own loaders: OBJ texture coordinates are flipped
     vertically (``flip_tex_coords``, default true); missing vertex normals are
     recomputed (smooth) unless ``face_normals`` is true."""
+    if props.type in ("obj", "serialized"):
+        return _mitsuba_mesh(props, path)
     import trimesh
     to_world = props.transform("to_world")
     face_normals = props.bool("face_normals", False)
@@ -127,6 +181,8 @@ def shape_to_mitsuba(props: Props, resolve_path):
             d[k] = props.float(k, min=0.0)
         elif k == "filename":
             d[k] = resolve_path(props.string(k), props.key(k))
+        elif k == "normals":
+            d[k] = props.string(k, choices=("smooth", "analytic"))
     if t in CURVE_FILES:
         # Loaded here so that a malformed curve file is reported under its key.
         try:
@@ -134,6 +190,16 @@ def shape_to_mitsuba(props: Props, resolve_path):
         except Exception as e:
             raise props.error("filename", f"Mitsuba could not load the curves: {e}") from None
     return d
+
+
+def build_shape(shape):
+    """A Mitsuba shape object for ``shape`` (an object already, or a ``load_dict`` dict)."""
+    return mi.load_dict(shape) if isinstance(shape, dict) else shape
+
+
+def registry_id(shape) -> int:
+    """The Dr.Jit registry id of a Mitsuba shape object (what a hit's shape pointer holds)."""
+    return int(dr.reinterpret_array(mi.UInt32, mi.ShapePtr(shape))[0])
 
 
 #: pbr shape index of registry ids that belong to no shape of the scene (0 is a miss).
@@ -144,12 +210,32 @@ class Geometry:
     """Mitsuba scene holding the shapes; ray queries for the integrators.
 
     ``mi_index[i]`` is pbr shape ``i``'s position in ``mi_scene.shapes()`` (and
-    ``shapes_dr()``); ``shape_of_id`` maps a shape's registry id to its pbr index."""
+    ``shapes_dr()``; -1 for a shape inside a shape group); ``shape_of_id`` maps a shape's
+    registry id to its pbr index.
 
-    def __init__(self, shapes: list):
+    Instancing (Mitsuba's ``shapegroup``/``instance``): ``groups`` maps pbr shapes to
+    the group holding them (built Mitsuba objects, not shapes of the scene themselves);
+    ``instances`` lists (group, to_world) pairs. A hit on an instance resolves to the
+    group's shape that was hit (``si.shape``; the preliminary intersection's shape
+    pointer is empty on instance hits), so every instance has its shapes' BSDFs and
+    media, as in Mitsuba."""
+
+    def __init__(self, shapes: list, groups: dict | None = None, instances: list | None = None):
+        groups, instances = groups or {}, instances or []
         d = {"type": "scene"}
+        members: dict[str, dict] = {}
         for i, s in enumerate(shapes):
-            d[f"shape_{i:06d}"] = s
+            if i in groups:
+                members.setdefault(groups[i], {})[f"shape_{i:06d}"] = s
+            else:
+                d[f"shape_{i:06d}"] = s
+        for g, m in members.items():
+            d[f"group_{g}"] = {"type": "shapegroup", **m}
+        for j, (g, to_world) in enumerate(instances):
+            if g not in members:
+                raise SceneError(f"scene: internal error: instance of unknown shape group {g!r}")
+            d[f"instance_{j:06d}"] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"group_{g}"},
+                                      "to_world": _to_mi_transform(to_world)}
         try:
             self.mi_scene = mi.load_dict(d, optimize=False)
         except Exception as e:
@@ -158,19 +244,29 @@ class Geometry:
         # Mitsuba names each shape by its key (objects built beforehand too); its order
         # is the dict's, but the map does not rely on that.
         names = [s.id() for s in mi_shapes]
-        if sorted(names) != sorted(d.keys() - {"type"}):
+        if sorted(names) != sorted(k for k in d if k.startswith(("shape_", "instance_"))):
             raise SceneError("scene: internal error: Mitsuba's shapes differ from pbr's")
-        to_pbr = np.array([int(name.split("_")[-1]) for name in names], dtype=np.int64)
-        self.mi_index = np.empty_like(to_pbr)
-        self.mi_index[to_pbr] = np.arange(len(to_pbr))
+        to_pbr = np.array([int(n.split("_")[-1]) if n.startswith("shape_") else NO_SHAPE for n in names],
+                          dtype=np.int64)
+        self.mi_index = np.full(len(shapes), -1, dtype=np.int64)
+        listed = to_pbr != NO_SHAPE
+        self.mi_index[to_pbr[listed]] = np.arange(len(to_pbr))[listed]
         reg = np.array(dr.reinterpret_array(mi.UInt32, self.mi_scene.shapes_dr()), dtype=np.int64)
-        table = np.full(int(reg.max(initial=0)) + 1, NO_SHAPE, dtype=np.uint32)
+        grouped = [(registry_id(shapes[i]), i) for i in groups]
+        size = max([int(reg.max(initial=0))] + [r for r, _ in grouped]) + 1
+        table = np.full(size, NO_SHAPE, dtype=np.uint32)
         table[reg] = to_pbr
+        for r, i in grouped:
+            table[r] = i
         self.shape_of_id = mi.UInt32(table)
-        self._curve_ends([mi_shapes[k] for k in self.mi_index])
+        self.instanced = bool(instances)
+        top = self.mi_index >= 0
+        self._curve_ends([mi_shapes[k] for k in self.mi_index[top]], top)
 
     def mi_shape(self, i: int):
-        """Mitsuba's shape object of pbr shape ``i``."""
+        """Mitsuba's shape object of pbr shape ``i`` (a top-level shape)."""
+        if self.mi_index[i] < 0:
+            raise SceneError(f"scene: internal error: shape {i} is inside a shape group")
         return self.mi_scene.shapes()[int(self.mi_index[i])]
 
     def sample_position(self, shapes: list, k, time, u, active):
@@ -191,19 +287,20 @@ class Geometry:
         reg = dr.reinterpret_array(mi.UInt32, shape_ptr)
         return dr.gather(mi.UInt32, self.shape_of_id, reg, active & (reg != 0))
 
-    def _curve_ends(self, shapes):
+    def _curve_ends(self, shapes, top):
         """Work around a Mitsuba 3.9 ``bsplinecurve`` bug: its shading partials look up
         segment floor(v * N) from the global curve parameter v = (v_local + i) / N, which
         rounds to 1 near the end of the last segment (i = N - 1), and then read past the
         segment table (measured: rare segfaults). Hits on that segment keep v_local below
         1 - N 2^-21, which keeps floor(v N) <= N - 1 in float32 (a shift < 1e-4 of the
-        last segment for N < 200 segments). ``shapes`` are in pbr's order."""
-        last, vmax = [], []
-        for s in shapes:
-            curve = s.shape_type() == int(mi.ShapeType.BSplineCurve)
-            n = s.primitive_count() if curve else 0
-            last.append(n - 1 if curve else 0xFFFFFFFF)
-            vmax.append(max(1.0 - n * 2.0 ** -21, 0.0) if curve else 1.0)
+        last segment for N < 200 segments). ``shapes``: the top-level ones, in pbr's
+        order; ``top``: per pbr shape, whether it is one of them (shapes in groups hold
+        no curves: the loader refuses them)."""
+        last, vmax = [0xFFFFFFFF] * len(top), [1.0] * len(top)
+        for i, s in zip(np.flatnonzero(top), shapes):
+            if s.shape_type() == int(mi.ShapeType.BSplineCurve):
+                n = s.primitive_count()
+                last[i], vmax[i] = n - 1, max(1.0 - n * 2.0 ** -21, 0.0)
         self._curves = any(v < 1.0 for v in vmax)
         if self._curves:
             self.curve_last_segment = mi.UInt32(last)
@@ -222,6 +319,8 @@ class Geometry:
         # RayFlags.All is Mitsuba's default (uv, dp/du, shading frame; no normal partials):
         # the shading frame's tangent follows dp/du, which anisotropic BSDFs rely on.
         si = pi.compute_surface_interaction(ray, mi.RayFlags.All, active)
+        if self.instanced:   # instance hits: pi.shape is empty, si.shape is the group's shape
+            shape = self.shape_of(si.shape, hit)
         return si, shape
 
     def unoccluded(self, si, p: mi.Point3f, active):

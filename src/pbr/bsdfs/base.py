@@ -26,12 +26,14 @@ REFLECTION, TRANSMISSION, DIFFUSE, GLOSSY, SPECULAR = 1, 2, 4, 8, 16
 
 class BSDFSample(Struct):
     """A sampled direction: ``wo`` (local), its solid-angle ``pdf``, the relative IOR
-    ``eta`` crossed, whether the lobe was a Dirac delta, ``weight`` = f cos / pdf, and
+    ``eta`` crossed, whether the lobe was a Dirac delta, ``weight`` = f cos / pdf,
     ``terminate``: the direction depends on the wavelength (dispersion), so only the
-    first wavelength may continue (pbrt-v4's TerminateSecondary)."""
+    first wavelength may continue (pbrt-v4's TerminateSecondary), and ``null``: the lobe
+    passes light straight on (Mitsuba's ``BSDFFlags::Null``, e.g. a thin dielectric's
+    transmission), which volumetric path tracing does not count as a bounce."""
 
     _fields = {"wo": "Vector3f", "pdf": "Float", "eta": "Float", "delta": "Bool", "weight": "Spectrum",
-               "terminate": "Bool"}
+               "terminate": "Bool", "null": "Bool"}
     _defaults = {"eta": 1.0}
 
 
@@ -56,6 +58,10 @@ class BSDFType:
     # Whether ``sample``'s weight is a random estimate that ``eval`` does not reproduce (a
     # layered BSDF's walk): the path replay then differentiates the sample's own weight.
     stochastic = False
+    # Whether a lobe passes light straight on (Mitsuba's Null flag): then
+    # ``null_transmission(ctx, idx, active)`` gives its weight, which shadow rays of the
+    # volumetric integrators are multiplied by when they cross the surface.
+    null_lobe = False
 
     def __init__(self):
         self.instances: list = []

@@ -2,8 +2,11 @@
 
 The complex IOR eta + i k is given per wavelength: ``material`` names a measured metal
 (Mitsuba's data files ``data/ior/<name>.{eta,k}.spd``, e.g. Au, Ag, Al, Cu, Cr; 'none'
-is a perfect mirror), or ``eta``/``k`` are given as spectra (rgb values use the unbounded
-upsampling). ``specular_reflectance`` scales the result (not physical; default 1).
+is a perfect mirror), or ``eta``/``k`` are given as spectra. RGB values are upsampled as
+Mitsuba's spectral variants do: clamped to [0, 1] and upsampled as a reflectance (so an
+RGB ``k`` of 3 acts as 1); ``{'type': 'rgb', 'value': ..., 'upsampling': 'unbounded'}``
+selects pbrt-v4's unbounded upsampling, which keeps values above 1 (docs/materials.md).
+``specular_reflectance`` scales the result (not physical; default 1).
 """
 
 from __future__ import annotations
@@ -36,9 +39,11 @@ def _load_eta_k(loader, props):
     if has_ek:
         if props.has("material"):
             raise props.error("material", "give either 'material' or 'eta'/'k', not both")
-        eta = load_spectrum(loader, props.raw("eta", 0.0), props.key("eta"), emitter=False, unbounded=True,
+        # Mitsuba's unbounded textures: RGB values are clamped to [0, 1] (see textures._rgb).
+        eta = load_spectrum(loader, props.raw("eta", 0.0), props.key("eta"), emitter=False, unbounded="mitsuba",
                             valid=NONNEGATIVE)
-        k = load_spectrum(loader, props.raw("k", 1.0), props.key("k"), emitter=False, unbounded=True, valid=NONNEGATIVE)
+        k = load_spectrum(loader, props.raw("k", 1.0), props.key("k"), emitter=False, unbounded="mitsuba",
+                          valid=NONNEGATIVE)
         return eta, k
     if material == "none":
         return (load_spectrum(loader, 0.0, props.key("eta"), emitter=False),
@@ -111,7 +116,7 @@ class RoughConductor(Conductor):
     specular_reflectance  texture  1         factor on the reflection (not physical; Mitsuba's)
     distribution          string   beckmann  microfacet distribution: 'beckmann' or 'ggx'
     alpha                 texture  0.1       roughness (RMS slope), or anisotropic alpha_u / alpha_v
-    sample_visible        bool     true      sample visible normals (GGX; Beckmann samples D cos)
+    sample_visible        bool     true      sample visible normals (else D(m) cos(theta_m))
     ====================  =======  ========  =======================================================
     """
 
@@ -126,14 +131,12 @@ class RoughConductor(Conductor):
         av = props.raw("alpha_v", props.raw("alpha", 0.1) if not props.has("alpha_u") else au)
         anisotropic = props.has("alpha_u") or props.has("alpha_v")
         au = load_spectrum(loader, au, props.key("alpha_u" if props.has("alpha_u") else "alpha"), emitter=False,
-                           valid=ROUGHNESS)
+                           unbounded="mitsuba", valid=ROUGHNESS, scalar=True)
         # Isotropic: one slot for both directions, so that the parameter <bsdf>.alpha
         # moves both (two slots under one key left alpha_v at its loaded value).
         av = (load_spectrum(loader, av, props.key("alpha_v" if props.has("alpha_v") else "alpha"), emitter=False,
-                            valid=ROUGHNESS)
-              if anisotropic else au)
-        # Visible-normal sampling exists for GGX only (see Microfacet).
-        visible = props.bool("sample_visible", True) and dist == GGX
+                            unbounded="mitsuba", valid=ROUGHNESS, scalar=True) if anisotropic else au)
+        visible = props.bool("sample_visible", True)
         i = super().add(loader, props)
         self.instances[i] = self.instances[i] + (au, av, (dist, visible))
         return i

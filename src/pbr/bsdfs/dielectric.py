@@ -272,22 +272,35 @@ class ThinDielectric(_Dielectric):
     """``thindielectric``: a thin dielectric slab (Mitsuba's): reflection R' = 2R / (1 + R),
     straight transmission. Parameters: those of ``dielectric`` (int_ior, ext_ior,
     specular_reflectance, specular_transmittance).
+
+    As in Mitsuba, the transmission is a *null* lobe: ``volpath`` does not count crossing
+    the slab as a bounce, and its shadow rays pass through with weight 1 - R' (times
+    specular_transmittance).
     """
 
     name = "thindielectric"
     flags = REFLECTION | TRANSMISSION | SPECULAR
+    null_lobe = True
+
+    def _reflectance(self, ctx, idx, cos, active):
+        r = fresnel_dielectric(dr.abs(cos), self._eta_of(ctx, idx, active))[0]
+        return 2.0 * r / (1.0 + r)
 
     def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
         wi = ctx.si.wi
-        eta = self._eta_of(ctx, idx, active)
-        r = fresnel_dielectric(dr.abs(wi.z), eta)[0]
-        r = 2.0 * r / (1.0 + r)
+        r = self._reflectance(ctx, idx, wi.z, active)
         sel_r = u1 < r
         wo = dr.select(sel_r, reflect(wi), -wi)
         weight = self._lobe_weight(ctx, idx, sel_r, 1.0, 1.0, active)
         pdf = dr.select(sel_r, r, 1.0 - r)
         return BSDFSample(wo, dr.select(active, pdf, 0.0), mi.Float(1.0), mi.Bool(True),
-                          dr.select(active & (pdf > 0), weight, 0.0))
+                          dr.select(active & (pdf > 0), weight, 0.0), mi.Bool(False), active & ~sel_r)
+
+    def null_transmission(self, ctx, idx, active):
+        """Weight of light passing straight through (Mitsuba's ``eval_null_transmission``)."""
+        t = 1.0 - self._reflectance(ctx, idx, ctx.si.wi.z, active)
+        s = self._scale("specular_transmittance", ctx, idx, active)
+        return mi.Spectrum(t) if s is None else t * s
 
 
 @BSDF_TYPES.register("roughdielectric")
@@ -305,7 +318,7 @@ class RoughDielectric(_Dielectric):
     specular_transmittance  texture    1         factor on the transmitted lobe
     distribution            string     beckmann  microfacet distribution: 'beckmann' or 'ggx'
     alpha                   texture    0.1       roughness (RMS slope), or anisotropic alpha_u / alpha_v
-    sample_visible          bool       true      sample visible normals (GGX; Beckmann samples D cos)
+    sample_visible          bool       true      sample visible normals (else D(m) cos(theta_m))
     ======================  =========  ========  =========================================================
     """
 
@@ -319,9 +332,7 @@ class RoughDielectric(_Dielectric):
         if dist not in (BECKMANN, GGX):
             raise props.error("distribution", f"expected 'beckmann' or 'ggx', got {dist!r}")
         visible = props.bool("sample_visible", True)
-        # Visible-normal sampling is implemented for GGX; Beckmann samples D cos (the
-        # same expectation as Mitsuba's visible Beckmann sampling, more variance).
-        inst["variant"] = (dist, visible and dist == GGX)
+        inst["variant"] = (dist, visible)
         if props.has("alpha_u") or props.has("alpha_v"):
             for k in ("alpha_u", "alpha_v"):
                 if not props.has(k):
@@ -333,8 +344,8 @@ class RoughDielectric(_Dielectric):
             names = ("alpha",)
         slots = []
         for k in names:
-            slots.append(load_spectrum(loader, props.raw(k, 0.1), props.key(k), emitter=False, unbounded=True,
-                                       valid=ROUGHNESS))
+            slots.append(load_spectrum(loader, props.raw(k, 0.1), props.key(k), emitter=False, unbounded="mitsuba",
+                                       valid=ROUGHNESS, scalar=True))
         inst["alpha"] = (slots[0], slots[-1])
         self._add_common(loader, props, inst)
         props.finish()

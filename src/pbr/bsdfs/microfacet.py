@@ -25,8 +25,7 @@ class Microfacet:
         # the image does change as alpha rises through it).
         self.au = clamp_keep_grad(alpha_u, 1e-4)
         self.av = clamp_keep_grad(alpha_v, 1e-4)
-        # Visible-normal sampling is implemented for GGX; Beckmann samples D(m) cos(theta_m).
-        self.sample_visible = sample_visible and kind == GGX
+        self.sample_visible = sample_visible
 
     def D(self, m):
         """Normal distribution (projected area density w.r.t. solid angle of m)."""
@@ -64,10 +63,39 @@ class Microfacet:
             r = self.D(m) * m.z
         return dr.select(dr.isfinite(r), r, 0.0)
 
+    def _beckmann_visible(self, wi, u: mi.Point2f):
+        """A visible normal of the Beckmann distribution (Heitz and d'Eon 2014): stretch
+        ``wi`` to unit roughness, sample the slope distribution seen from it (the x slope
+        by Newton's method on its CDF in the erf domain, as Mitsuba does, starting from
+        the exact solution at grazing incidence), rotate and unstretch."""
+        s = dr.select(wi.z < 0, -1.0, 1.0)
+        v = dr.normalize(mi.Vector3f(self.au * wi.x * s, self.av * wi.y * s, wi.z * s))
+        sin_t = dr.safe_sqrt(dr.fma(-v.z, v.z, 1.0))
+        inv_sin = dr.select(sin_t > 0, dr.rcp(sin_t), 0.0)
+        cos_phi = dr.select(sin_t > 0, v.x * inv_sin, 1.0)
+        sin_phi = dr.select(sin_t > 0, v.y * inv_sin, 0.0)
+        tan_t = sin_t / v.z
+        cot_t = dr.rcp(tan_t)
+        top = dr.erf(cot_t)
+        ux = dr.clip(u.x, 1e-6, 1.0 - 1e-6)
+        uy = dr.clip(u.y, 1e-6, 1.0 - 1e-6)
+        x = top - (top + 1.0) * dr.erf(dr.sqrt(-dr.log(ux)))
+        target = ux * (1.0 + top + tan_t * dr.exp(-cot_t * cot_t) / dr.sqrt(dr.pi))
+        for _ in range(3):
+            slope = dr.erfinv(x)
+            value = 1.0 + x + tan_t * dr.exp(-slope * slope) / dr.sqrt(dr.pi) - target
+            x = x - value / (1.0 - slope * tan_t)
+        sx, sy = dr.erfinv(x), dr.erfinv(2.0 * uy - 1.0)
+        mx = (cos_phi * sx - sin_phi * sy) * self.au
+        my = (sin_phi * sx + cos_phi * sy) * self.av
+        return dr.normalize(mi.Vector3f(-mx, -my, 1.0))
+
     def sample(self, wi, u: mi.Point2f):
-        """Sample a microfacet normal; visible normals (Heitz 2018) for GGX when
-        ``sample_visible``, otherwise D(m) cos(theta_m) (used for Beckmann)."""
-        if self.sample_visible and self.kind == GGX:
+        """Sample a microfacet normal: visible normals when ``sample_visible`` (Heitz 2018
+        for GGX; Heitz and d'Eon 2014 for Beckmann), otherwise D(m) cos(theta_m)."""
+        if self.sample_visible and self.kind == BECKMANN:
+            m = self._beckmann_visible(wi, u)
+        elif self.sample_visible:
             # Stretch wi to the unit-roughness configuration (upper hemisphere).
             s = dr.select(wi.z < 0, -1.0, 1.0)
             v = dr.normalize(mi.Vector3f(self.au * wi.x * s, self.av * wi.y * s, wi.z * s))

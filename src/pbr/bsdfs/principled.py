@@ -131,12 +131,14 @@ class _PrincipledFamily(BSDFType):
 
     def _parse(self, loader, props, inst: dict) -> None:
         for name, default in self._ALWAYS:
+            # Every parameter but base_color is a float (Mitsuba reads it with eval_1).
             inst[name] = load_spectrum(loader, props.raw(name, default), props.key(name), emitter=False,
-                                       unbounded=name in self._UNBOUNDED, valid=self._RANGES.get(name, UNIT))
+                                       unbounded=name in self._UNBOUNDED, valid=self._RANGES.get(name, UNIT),
+                                       scalar=name != "base_color")
         for name in self._OPTIONAL:
             v = props.raw(name)
             inst[name] = None if _is_off(v) else load_spectrum(loader, v, props.key(name), emitter=False,
-                                                               valid=self._RANGES.get(name, UNIT))
+                                                               valid=self._RANGES.get(name, UNIT), scalar=True)
         for name in self._RATES:
             inst[name] = props.float(name, 1.0, min=0.0)
 

@@ -217,7 +217,7 @@ class RoughPlastic(Plastic):
     nonlinear             bool       false            account for the colour shift of internal scattering
     distribution          string     beckmann         microfacet distribution: 'beckmann' or 'ggx'
     alpha                 texture    0.1              roughness (RMS slope), or anisotropic alpha_u / alpha_v
-    sample_visible        bool       true             sample visible normals (GGX; Beckmann samples D cos)
+    sample_visible        bool       true             sample visible normals (else D(m) cos(theta_m))
     ====================  =========  ===============  =======================================================
     """
 

@@ -111,6 +111,7 @@ class SamplingIntegrator:
     differentiable = False        # whether render_forward/render_backward are implemented
     surfaces_only = False         # whether participating media are an error
     traces_light_paths = False    # whether every emitter must emit rays (sample_Le), without media
+    needs_pinhole = False         # whether paths connect to the camera (a 'perspective' camera only)
     # Records a function's kernels once and replays them (dr.freeze for pbr scenes): set
     # by pbr.freeze, a layer above the integrators; None where pbr.freeze is not loaded.
     recorder = None
@@ -127,6 +128,10 @@ class SamplingIntegrator:
         integrator other than its own) and take this integrator's light samplers for the
         scene's current lights (cached per scene build by ``LightSet.sampler``)."""
         self.check(scene)
+        cam = scene.sensors[sensor] if 0 <= sensor < len(scene.sensors) else None
+        if self.needs_pinhole and cam is not None and type(cam).name != "perspective":
+            raise SceneError(f"{self.path}: the {self.name!r} integrator connects paths to the camera, which needs "
+                             f"a 'perspective' camera (sensor {sensor} is {type(cam).name!r})")
         self.light_sampler = scene.lights.sampler(self.light_sampler_type)
         if self.traces_light_paths:
             self.emission_sampler = scene.lights.sampler("power")
@@ -184,7 +189,8 @@ class SamplingIntegrator:
         py = mi.Float(pixel // w) + 0.5 + off.y
         inside = (px >= 0) & (px < w) & (py >= 0) & (py < h)
         weight = dr.select(inside, weight, 0.0)
-        ray = cam.sample_ray(mi.Point2f(px / w, py / h))
+        aperture = mi.Point2f(rng.next_float32(), rng.next_float32()) if cam.needs_aperture_sample else None
+        ray = cam.sample_ray(mi.Point2f(px / w, py / h), aperture)
         return rng, wl, ray, weight, inside
 
     # -- rendering ------------------------------------------------------------------------

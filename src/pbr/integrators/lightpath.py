@@ -104,6 +104,7 @@ class LightTracingIntegrator(SamplingIntegrator):
     ``self.camera`` the sensor being rendered): ``render`` = the camera-sample image plus
     the splatted image over ``spp``. Primal only."""
 
+    needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
     traces_light_paths = True
 
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):

@@ -172,11 +172,23 @@ class PRBVolPathIntegrator(_MediumAware):
         T[grid] = T * volume.hero_ratio(T_acc)
         return T, n_null, dL_fwd
 
+    def _null_crossing(self, state, w, lanes, mode, dL, adj):
+        """A shadow ray crosses a null lobe (a thin dielectric) with weight ``w``
+        (attached in the adjoint modes: its derivative times ``adj`` is propagated)."""
+        T, n_null, dL_fwd = state
+        if mode != PRIMAL:
+            with dr.resume_grad():
+                f = _ratio(w)
+            dL_fwd = self._propagate(mode, dL, lanes, adj, f, dL_fwd)
+        T[lanes] = T * dr.detach(w)
+        return T, n_null, dL_fwd
+
     def _transmittance(self, scene, rng, sray, p_light, medium, wl, mode, dL, adj, dL_fwd, active):
         """(transmittance from ``sray.o`` to ``p_light``, forward derivative)."""
         state = (mi.Spectrum(1.0), mi.UInt32(0), dL_fwd)
         T, _, dL_fwd = volume.transmittance(scene, sray, p_light, medium, active, state, self._shadow_segment,
-                                            (scene.media, wl, rng, mode, dL, adj))
+                                            (scene.media, wl, rng, mode, dL, adj), wl=wl,
+                                            crossing=self._null_crossing, crossing_args=(mode, dL, adj))
         return T, dL_fwd
 
     # -- the estimator --------------------------------------------------------------------
@@ -233,6 +245,14 @@ class PRBVolPathIntegrator(_MediumAware):
             bsdf_id, skip, real, at_vertex, go_on, sc, rs = volume.classify(
                 scene, shape, surf, scattered, skip, depth, max_depth)
             valid |= at_vertex
+            rs_sample = rs
+            lobe = mi.Bool(False)
+            crossed = mi.Bool(False)
+            if bsdfs.has_null_lobes:
+                # A null lobe (thindielectric's transmission) is no bounce (Mitsuba's
+                # volumetric integrators): such surfaces are sampled at the depth limit too.
+                lobe = real & bsdfs.has_null_lobe(bsdf_id, real) & (depth < max_depth)
+                rs_sample = rs | lobe
 
             # -- next-event estimation ---------------------------------------------------------
             ctx = ShadingContext(si, wl)
@@ -245,7 +265,7 @@ class PRBVolPathIntegrator(_MediumAware):
             with dr.resume_grad(when=not primal):
                 ls = lights.sample_Li(self.light_sampler, ref, u_light, u_pos, wl, nee)
                 wo_em = si.to_local(ls.wi)
-                f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs)
+                f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs_sample)
                 if has_media:
                     f_em, pdf_em = volume.phase_nee(media, medium, ray, ls.wi, sc, f_em, pdf_em)
                 w_em = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf, dr.detach(pdf_em)))
@@ -269,6 +289,16 @@ class PRBVolPathIntegrator(_MediumAware):
 
             # -- continue: BSDF or phase function sampling ----------------------------------------
             wi_next, pdf_next, w_next, delta_next = volume.sample_direction(media, medium, ray, si, bs, sc, rng)
+            if bsdfs.has_null_lobes:
+                # Crossed by the null lobe: on as through a null surface (no vertex, the
+                # MIS state of the last vertex kept), weighted by the lobe (its weight's
+                # derivative, from specular_transmittance only, is not propagated).
+                crossed = lobe & bs.null & (bs.pdf > 0)
+                beta[crossed] = beta * bs.weight
+                go_on &= ~crossed
+                rs &= ~crossed
+                at_vertex &= ~crossed
+                skip |= crossed
             cont = go_on & (pdf_next > 0)
             if not primal:
                 with dr.resume_grad():
@@ -276,7 +306,9 @@ class PRBVolPathIntegrator(_MediumAware):
                     f_bs = dr.select(replay_sample, f_sampled, f_bs)
                     f_det = bs.weight * bs.pdf
                     ratio = dr.select(f_det != 0, f_bs * dr.rcp(dr.detach(f_det)), 0.0)
-                    Lr = dr.select(rs & cont, L * dr.replace_grad(mi.Spectrum(1.0), ratio), 0.0)
+                    # (lanes that crossed a null lobe: the lobe's weight times its choice
+                    # probability, as for the delta lobes)
+                    Lr = dr.select((rs & cont) | crossed, L * dr.replace_grad(mi.Spectrum(1.0), ratio), 0.0)
                     # One traversal for the light sample and the continuation: they share
                     # the BSDF query's graph (f_em and f_sampled), which a first traversal
                     # would clear.

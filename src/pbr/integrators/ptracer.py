@@ -35,6 +35,7 @@ class ParticleTracerIntegrator(SamplingIntegrator):
     ================  ====  =======  ===============================================================
     """
 
+    needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
     name = "ptracer"
     traces_light_paths = True
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from ..bsdfs.base import ShadingContext
 from ..media import majorant
 
 # Shadow rays stop this fraction short of the light sample (its own surface is no occluder).
@@ -60,12 +61,18 @@ def free_flight(media, rng, ray, medium, t_max, wl, active, state, collide, args
 
 
 @dr.syntax
-def transmittance(scene, ray, p_light, medium, active, state, segment, args=()):
+def transmittance(scene, ray, p_light, medium, active, state, segment, args=(), wl=None, crossing=None,
+                  crossing_args=()):
     """Follow a shadow ray from ``ray.o`` toward ``p_light`` through media and ``null``
     surfaces. ``state[0]`` is the transmittance; in each medium segment (ray origin to
     the next surface, or to the light) ``segment(state, ray, medium, t_end, in_medium,
     *args)`` returns the new state (``medium``: index + 1). The ray stops at an opaque surface (transmittance 0)
-    or where the transmittance is 0. Returns the final state."""
+    or where the transmittance is 0. Returns the final state.
+
+    With the wavelengths ``wl``, surfaces whose BSDF has a null lobe (``thindielectric``'s
+    transmission, as Mitsuba's volumetric integrators treat it) are crossed too, the
+    transmittance multiplied by the lobe's weight ``w``; ``crossing(state, w, lanes,
+    *crossing_args)``, if given, applies it instead (``w`` then carries derivatives)."""
     going = mi.Bool(active)
     med = mi.UInt32(medium)
     ray = mi.Ray3f(ray)
@@ -77,7 +84,11 @@ def transmittance(scene, ray, p_light, medium, active, state, segment, args=()):
         t_end = dr.select(hit, si.t, remaining)
         if has_media:
             state = segment(state, ray, med, t_end, going & (med > 0), *args)
-        passable, med, ray = cross_null(scene, shape, si, ray, p_light, med, hit)
+        passable, med, ray, w, lobe = cross_null(scene, shape, si, ray, p_light, med, hit, wl, crossing is not None)
+        if w is not None and crossing is not None:
+            state = crossing(state, w, lobe, *crossing_args)
+        elif w is not None:
+            state = (state[0] * w,) + tuple(state[1:])
         T = dr.select(hit & ~passable, 0.0, state[0])
         state = (T,) + tuple(state[1:])
         going &= passable & (dr.max(T) > 0)
@@ -106,14 +117,25 @@ def aim(ray, p_light):
     return ray
 
 
-def cross_null(scene, shape, si, ray, p_light, medium, hit):
+def cross_null(scene, shape, si, ray, p_light, medium, hit, wl=None, grad=False):
     """A shadow ray toward ``p_light`` meets surface ``si``: (lanes that pass it, being
-    ``null`` surfaces, the medium beyond, the ray continuing behind it)."""
+    ``null`` surfaces (or, given the wavelengths ``wl``, surfaces with a null lobe), the
+    medium beyond, the ray continuing behind it, the weight of the crossing (None: 1; with
+    ``grad``, attached to the parameters), the lanes crossing a null lobe)."""
+    bsdfs = scene.bsdfs
     bid = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
-    passable = hit & scene.bsdfs.is_null(bid, hit)
+    passable = hit & bsdfs.is_null(bid, hit)
+    w, lobe = None, mi.Bool(False)
+    if wl is not None and bsdfs.has_null_lobes:
+        lobe = hit & bsdfs.has_null_lobe(bid, hit)
+        si_l = mi.SurfaceInteraction3f(si)
+        si_l.wi = si.to_local(-ray.d)
+        with dr.resume_grad(when=grad):
+            w = dr.select(lobe, bsdfs.null_transmission(bid, ShadingContext(si_l, wl), lobe), 1.0)
+        passable |= lobe
     medium = enter(scene, shape, si, ray.d, medium, passable)
     nxt = aim(si.spawn_ray(dr.normalize(p_light - si.p)), p_light)
-    return passable, medium, dr.select(passable, nxt, ray)
+    return passable, medium, dr.select(passable, nxt, ray), w, lobe
 
 
 def hero_ratio(T_maj):

@@ -7,9 +7,11 @@ shape (nz, ny, nx[, channels]) covers the unit cube of the medium's local space,
 interpolate trilinearly with clamped addressing. Outside the unit cube a grid is zero
 (pbrt-v4: the medium is bounded by its grid).
 
-RGB grids are stored as per-voxel spectra (pbrt-v4's ``rgbgrid``): three sigmoid
-coefficients and a scale per voxel, so a lookup evaluates the eight neighbouring
-spectra at the sampled wavelengths and interpolates the values.
+RGB grids are stored as Mitsuba's spectral ``gridvolume`` stores them: per voxel, three
+sigmoid coefficients of rgb / (2 max(rgb)) and the scale 2 max(rgb) (for albedos too).
+A lookup interpolates the eight neighbouring voxels' spectra (evaluated at the sampled
+wavelengths) and, separately, their scales, and multiplies the two, as Mitsuba does
+(which differs from interpolating scale times spectrum where the scales vary).
 """
 
 from __future__ import annotations
@@ -114,9 +116,10 @@ class GridTable:
         g, form = self.grids[gid]
         if g.shape[3] == 1:
             return g[..., 0]
-        # A sigmoid spectrum lies in [0, 1]: the unbounded form is at most its scale
-        # (2 max(rgb)), the albedo form at most 1.
-        return 2.0 * g.max(axis=3) if form == "unbounded" else np.minimum(1.0, 2.0 * g.max(axis=3))
+        # A sigmoid spectrum lies in [0, 1]: a voxel's value is at most its scale
+        # (2 max(rgb)); the interpolated spectrum times the interpolated scale is at most
+        # the largest scale among the voxels interpolated (cell_maxima takes it).
+        return 2.0 * g.max(axis=3)
 
     def build(self) -> None:
         ad = self._sync()
@@ -156,6 +159,7 @@ class GridTable:
             ch = dr.gather(mi.UInt32, self.channels, gid, inside)
             rgb = inside & (ch == 4)
         out = mi.Spectrum(0.0)
+        scale = mi.Float(0.0)   # interpolated scales of RGB voxels (Mitsuba's lookup)
         for dz in (0, 1):
             iz = hi_i.z if dz else lo_i.z
             wz = f.z if dz else 1.0 - f.z
@@ -172,23 +176,25 @@ class GridTable:
                         v = dr.gather(mi.Float, self.data, base, inside)
                         c = mi.Array3f(v, dr.gather(mi.Float, self.data, base + 1, rgb),
                                        dr.gather(mi.Float, self.data, base + 2, rgb))
-                        s = dr.gather(mi.Float, self.data, base + 3, rgb)
-                        val = dr.select(rgb, s * spec.sigmoid_polynomial(c, wl_lambda), mi.Spectrum(v))
+                        scale += w * dr.gather(mi.Float, self.data, base + 3, rgb)
+                        val = dr.select(rgb, spec.sigmoid_polynomial(c, wl_lambda), mi.Spectrum(v))
                     else:
                         val = mi.Spectrum(dr.gather(mi.Float, self.data, off + vox, inside))
                     out += w * val
+        if self.has_rgb:
+            out = dr.select(rgb, out * scale, out)
         return dr.select(inside, out, 0.0)
 
 
 def _rgb_voxels(rgb: np.ndarray, form: str) -> np.ndarray:
-    """(n, 3) RGB voxels -> (n, 4) sigmoid coefficients and scale."""
+    """(n, 3) RGB voxels -> (n, 4) sigmoid coefficients and scale: Mitsuba's spectral
+    gridvolume normalisation, rgb / (2 max(rgb)) and 2 max(rgb), in every ``form``
+    (albedo grids are clamped to [0, 1] first)."""
     rgb = rgb.astype(np.float64)
-    if form == "unbounded":
-        scale = 2.0 * rgb.max(axis=1)
-        norm = rgb / np.maximum(scale, 1e-30)[:, None]
-    else:
-        scale = np.ones(len(rgb))
-        norm = np.clip(rgb, 0.0, 1.0)
+    if form != "unbounded":
+        rgb = np.clip(rgb, 0.0, 1.0)
+    scale = 2.0 * rgb.max(axis=1)
+    norm = rgb / np.maximum(scale, 1e-8)[:, None]
     c = spec.rgb_to_coeffs(mi.Color3f(*(norm[:, k].astype(np.float32) for k in range(3))))
     coeffs = np.stack([np.asarray(c[k], np.float64) for k in range(3)], axis=1)
     return np.concatenate([coeffs, scale[:, None]], axis=1).astype(np.float32)

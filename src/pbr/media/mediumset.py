@@ -146,6 +146,7 @@ class MediumSet:
             p = Props(v, path, loader)
             v = p.raw("value", 1.0)
             path = p.key("value")
+            p.transform("to_world")   # every Mitsuba volume takes one; a constant ignores it
             p.finish()
         if isinstance(v, dict) and v.get("type") not in ("rgb", "spectrum", "blackbody", "d65", "ref"):
             raise SceneError(f"{path}: expected a float, rgb, spectrum or constvolume, got type {v.get('type')!r}")
@@ -239,8 +240,21 @@ class MediumSet:
         albedo   volume  0.75     single-scattering albedo (grids of one medium share to_world)
         scale    float   1        factor on the coefficients
         =======  ======  =======  =============================================================
+
+        As in Mitsuba, the medium fills the box of its ``sigma_t`` volume only (the unit
+        cube mapped by the volume's ``to_world``), also where ``sigma_t`` is a constant or
+        a ``constvolume`` (then by default the unit cube [0, 1]^3); outside it, the shape
+        holding the medium is empty.
         """
         m.s1, m.g1 = self._volume(loader, props, "sigma_t", 1.0, m, "unbounded")
+        if m.g1 == NO_GRID:
+            v = props.raw("sigma_t", 1.0)
+            cv = isinstance(v, dict) and v.get("type") == "constvolume"
+            to_world = Props(v, props.key("sigma_t"), loader).transform("to_world") if cv else np.eye(4)
+            try:
+                self._set_bounds(m, np.linalg.inv(to_world), props.key("sigma_t"))
+            except np.linalg.LinAlgError:
+                raise props.error("sigma_t", "the volume's to_world is singular") from None
         m.s2, m.g2 = self._volume(loader, props, "albedo", 0.75, m, "albedo")
         m.scale = props.float("scale", 1.0, min=0.0)
 

@@ -89,7 +89,10 @@ HG_ASYMMETRY = Range(-1.0, 1.0, what="a Henyey-Greenstein asymmetry")
 
 
 def _is_transform(v) -> bool:
-    return type(v).__name__ in ("ScalarTransform4f", "ScalarTransform4d", "Transform4f", "ScalarAffineTransform4f")
+    """A Mitsuba transform object. Their Python type names change with the active variant
+    (``mi.ScalarTransform4f`` is ``AffineTransform4f`` under ``scalar_rgb``), so test for
+    the ``matrix`` attribute, not the name."""
+    return hasattr(v, "matrix") and not isinstance(v, np.ndarray)
 
 
 class Props:
@@ -201,6 +204,12 @@ class Props:
             except (TypeError, ValueError):
                 raise self.error(name, f"expected a transform (mi.ScalarTransform4f or 4x4 array), got {type(v).__name__}") from None
         m = m.reshape(4, 4) if m.size == 16 else m
+        if m.shape == (3, 3):
+            # A 2D transform (``mi.ScalarTransform3f``, e.g. a texture's ``to_uv``): its
+            # linear part and translation go where Mitsuba's 3x3 -> 4x4 expansion puts them.
+            e = np.eye(4)
+            e[:2, :2], e[:2, 3], e[3, :2] = m[:2, :2], m[:2, 2], m[2, :2]
+            m = e
         if m.shape != (4, 4) or not np.all(np.isfinite(m)):
             raise self.error(name, f"expected a 4x4 finite matrix, got shape {m.shape}")
         return m

@@ -19,7 +19,7 @@ import os
 from .. import backend
 from ..bsdfs import BSDFSet, bsdf_names
 from ..cameras import SENSORS
-from ..geometry import SHAPE_PARAMS, shape_to_mitsuba
+from ..geometry import CURVE_FILES, SHAPE_PARAMS, build_shape, shape_to_mitsuba
 from ..integrators import INTEGRATORS
 from ..lights import LIGHT_TYPES, LightSet
 from ..media import MEDIUM_TYPES, MediumSet
@@ -127,12 +127,23 @@ class Loader:
         """Whether a child dict is a medium or a reference to one."""
         return self._target_type(v) in MEDIUM_TYPES
 
-    def _shape(self, key: str, v: dict, shapes: ShapeList, defaults: dict) -> None:
-        """Parse shape ``key`` with its BSDF, emitter and media into ``shapes``."""
+    def _shape(self, key: str, v: dict, shapes: ShapeList, defaults: dict, group: str | None = None) -> None:
+        """Parse shape ``key`` with its BSDF, emitter and media into ``shapes`` (inside
+        shape group ``group``, if given: then built as a Mitsuba object, without emitter)."""
         path = f"scene.{key}"
         p = Props(v, path, self)
         p.mark("id")
         geo = shape_to_mitsuba(p, self.resolve_path)
+        if group is not None:
+            if p.type in CURVE_FILES:
+                raise p.error(None, f"{p.type!r} shapes inside a shapegroup are not supported")
+            emitters = [k for k, c in p.children() if c["type"] in LIGHT_TYPES]
+            if emitters:
+                raise p.error(emitters[0], "shapes inside a shapegroup cannot carry emitters (as in Mitsuba)")
+            try:
+                geo = build_shape(geo)
+            except Exception as e:
+                raise p.error(None, f"Mitsuba could not build the shape: {e}") from None
         sidx = len(shapes)
         children = p.children()
         if p.has("bsdf"):
@@ -167,11 +178,52 @@ class Loader:
             if p.has(k):
                 media[j] = self.medium(p.raw(k), p.key(k)) + 1
         p.finish()
+        if group is not None:
+            shapes.groups[len(shapes)] = group
         shapes.add(geo, b, light, v.get("id", key), path, media)
+
+    def _shapegroup(self, key: str, v: dict, shapes: ShapeList, defaults: dict) -> None:
+        """``shapegroup`` (Mitsuba's): shapes (with their BSDFs and media) that are not
+        rendered themselves but through ``instance`` shapes referring to the group."""
+        p = Props(v, f"scene.{key}", self)
+        p.mark("id")
+        members = 0
+        for k, c in p.children():
+            if c["type"] in ("shapegroup", "instance"):
+                raise p.error(k, f"a shapegroup cannot contain a {c['type']!r} (nested instancing is not supported)")
+            if c["type"] not in SHAPE_PARAMS:
+                raise p.error(k, f"a shapegroup holds shapes only, got {c['type']!r} "
+                                 f"(supported: {', '.join(sorted(SHAPE_PARAMS))})")
+            p.mark(k)
+            self._shape(f"{key}.{k}", c, shapes, defaults, group=key)
+            members += 1
+        p.finish()
+        if not members:
+            raise p.error(None, "a shapegroup needs at least one shape")
+
+    def _instance(self, key: str, v: dict, shapes: ShapeList) -> None:
+        """``instance`` (Mitsuba's): the shapes of a referenced ``shapegroup`` moved by
+        ``to_world``."""
+        p = Props(v, f"scene.{key}", self)
+        p.mark("id")
+        to_world = p.transform("to_world")
+        refs = []
+        for k, c in p.children():
+            if c["type"] != "ref":
+                raise p.error(k, f"an instance takes a reference to a shapegroup, got a {c['type']!r}")
+            target = self.resolve_ref(c.get("id"), p.key(k))
+            if target.get("type") != "shapegroup":
+                raise p.error(k, f"an instance refers to a shapegroup, {c.get('id')!r} is a {target.get('type')!r}")
+            p.mark(k)
+            refs.append(self.ids[c["id"]][1])
+        p.finish()
+        if len(refs) != 1:
+            raise p.error(None, f"an instance needs exactly one shapegroup reference, got {len(refs)}")
+        shapes.instances.append((refs[0].split(".", 1)[1], to_world))
 
     def load(self) -> Scene:
         sensors, integrator_props = [], None
-        shapes, defaults = ShapeList(), {}
+        shapes, defaults, instances = ShapeList(), {}, []
         root = Props(self.d, "scene", self)
         for key, v in self.d.items():
             if key == "type":
@@ -197,6 +249,10 @@ class Loader:
                 integrator_props = Props(v, path, self)
             elif t in SHAPE_PARAMS:
                 self._shape(key, v, shapes, defaults)
+            elif t == "shapegroup":
+                self._shapegroup(key, v, shapes, defaults)
+            elif t == "instance":
+                instances.append((key, v))
             elif t in TEXTURE_TYPES and (t != "mix" or "tex1" in v or "tex2" in v):
                 # pbrt-v4 has both a mix texture (tex1, tex2) and a mix material. Its range
                 # is checked where it is referenced; here only that it is finite.
@@ -209,7 +265,9 @@ class Loader:
                 self.medium(v, path)
             else:
                 raise SceneError(f"{path}: unknown plugin type {t!r}")
-        if not len(shapes):
+        for key, v in instances:   # after every shapegroup, wherever it appears
+            self._instance(key, v, shapes)
+        if len(shapes) == len(shapes.groups) and not shapes.instances:
             raise SceneError("scene: the scene has no shapes")
         if not sensors:
             sensors.append(SENSORS["perspective"](Props({"type": "perspective", "fov": 45.0}, "scene.sensor", self)))
@@ -240,6 +298,7 @@ def load_file(path: str, parallel: bool = True, optimize: bool = True, **kwargs)
     ext = os.path.splitext(path)[1].lower()
     if ext != ".xml":
         raise SceneError(f"{path}: unsupported scene format {ext!r} (supported: .xml)")
+    backend.ensure()   # the XML reader builds Mitsuba transforms: a variant must be set
     d, lines = parse_file_lines(path, **kwargs)
     try:
         return load_dict(d, base_dir=os.path.dirname(os.path.abspath(path)))

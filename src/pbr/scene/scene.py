@@ -24,6 +24,8 @@ class ShapeList:
 
     def __init__(self):
         self.geometry, self.bsdf, self.light, self.ids, self.paths, self.media = [], [], [], [], [], []
+        self.groups: dict[int, str] = {}   # shape -> the shapegroup holding it (instancing)
+        self.instances: list = []          # (shapegroup id, 4x4 to_world) per instance
 
     def __len__(self):
         return len(self.ids)
@@ -43,7 +45,7 @@ class Scene:
         self.bsdfs = bsdfs
         self.lights = lights
         self.media = media
-        self.geometry = Geometry(shapes.geometry)
+        self.geometry = Geometry(shapes.geometry, shapes.groups, shapes.instances)
         self.mi_scene = self.geometry.mi_scene
         self.shape_ids = shapes.ids
         # Mitsuba's shapes take pbr's ids (Geometry named them by position), so that

@@ -10,7 +10,16 @@ pointing at the offending element; :func:`parse_file_lines` also returns where e
 path of the dict came from, so that the loader's errors can name the line too.
 Supported: all object tags, every property tag Mitsuba 3 has (plus ``<blackbody>``),
 transforms, ``<ref>``, ``<alias>``, ``<default>`` with ``$name`` substitution and keyword
-overrides, and ``<include>``.
+overrides, ``<include>`` and ``<path>`` (search paths).
+
+Relative file names are found the way Mitsuba's file resolver finds them: a search
+path starts as [the main file's directory, the working directory]; ``<path value=..>``
+(a direct child of a ``<scene>``) puts a directory in front; ``<include>`` looks in
+the including file's directory first, then the search path, and a ``<path>`` inside
+an included file only counts for that file's own includes. ``filename`` parameters
+are looked up in the main file's search path once the whole file is read (Mitsuba
+resolves them when it builds the plugins), then, as pbr's fallback where Mitsuba
+would fail, in the directory of the file they appear in.
 Scenes older than version 2.0.0 (camelCase parameter names) are rejected. Where
 Mitsuba's own reading is surprising we follow it, for parity: ``<rotate>`` does not
 normalise its axis, ``<lookat>`` without ``up`` picks Mitsuba's up vector, and keyword
@@ -47,10 +56,16 @@ _OBJECT_TAGS = ("scene", "shape", "bsdf", "emitter", "sensor", "film", "sampler"
                 "spectrum")
 _PROPERTY_TAGS = ("float", "integer", "boolean", "string", "point", "vector", "rgb",
                   "spectrum", "blackbody", "transform")
-_SPECIAL_TAGS = ("ref", "default", "include", "alias")
+_SPECIAL_TAGS = ("ref", "default", "include", "alias", "path")
 _TRANSFORM_OPS = ("translate", "rotate", "scale", "matrix", "lookat")
 _PARAM_RE = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)?")
 _SPLIT_RE = re.compile(r"[,\s]+")
+
+
+class _Filename(str):
+    """A ``filename`` value read from the file in directory ``fallback``, to be looked up
+    in the main search path once parsing ends (:meth:`_Parser.resolve_filenames`)."""
+    fallback: str
 
 
 @dataclass
@@ -134,8 +149,11 @@ class _Parser:
         self.aliases: dict[str, str] = {}
         self.refs: list[tuple[dict, _Node]] = []
         self.include_stack: list[str] = []
-        self.root_dir = os.getcwd()
         self.nodes: dict[int, dict] = {}      # id(plugin dict) -> its entries' elements
+        # Mitsuba's file resolver: the search path of the file being read (a copy inside
+        # includes) and the main file's (used for ``filename`` values).
+        self.search: list[str] = [os.getcwd()]
+        self.main_search = self.search
 
     # ----------------------------------------------------------------- helpers
     @staticmethod
@@ -208,16 +226,35 @@ class _Parser:
                 out.append(default)
         return out
 
-    def resolve(self, base_dir: str, filename: str) -> str:
-        """Absolute path of filename if it exists relative to base_dir (the directory
-        of the file it appears in) or, failing that, to the main file's directory."""
+    @staticmethod
+    def lookup(dirs, filename: str) -> str | None:
+        """Absolute path of the first ``dir/filename`` that exists, or None."""
         if os.path.isabs(filename):
-            return filename
-        for d in (base_dir, self.root_dir):
+            return filename if os.path.exists(filename) else None
+        for d in dirs:
             cand = os.path.join(d, filename)
             if os.path.exists(cand):
                 return os.path.abspath(cand)
-        return filename
+        return None
+
+    def resolve(self, base_dir: str, filename: str) -> str:
+        """A file named in a file in ``base_dir``, looked up in the current search path,
+        then in base_dir; unchanged when it is in neither."""
+        if os.path.isabs(filename):
+            return filename
+        found = self.lookup(self.search + [base_dir], filename)
+        return found if found is not None else filename
+
+    def resolve_filenames(self, d: dict) -> dict:
+        """Look up every deferred ``filename`` value of ``d`` (recursively) in the main
+        search path, then in the directory of the file it came from (pbr's fallback)."""
+        for k, v in d.items():
+            if isinstance(v, _Filename):
+                found = self.lookup(self.main_search + [v.fallback], str(v))
+                d[k] = found if found is not None else str(v)
+            elif isinstance(v, dict):
+                self.resolve_filenames(v)
+        return d
 
     # ------------------------------------------------------------------ parsing
     def parse_root(self, root: _Node, base_dir: str) -> dict:
@@ -227,12 +264,12 @@ class _Parser:
         if "version" not in root.attrs:
             raise self.err(root, 'missing required attribute "version" on the root element')
         self.check_version(root, self.subst(root, root.attrs["version"]))
-        self.root_dir = base_dir
+        self.search.insert(0, os.path.abspath(base_dir))
         node = _Node(root.tag, {k: v for k, v in root.attrs.items() if k != "version"},
                      root.line, root.file, root.children)
         out = self.object(node, base_dir, is_root=True)
         self.finish(root)
-        return out
+        return self.resolve_filenames(out)
 
     def check_version(self, node: _Node, version: str):
         m = re.fullmatch(r"(\d+)\.(\d+)\.(\d+)", version.strip())
@@ -338,9 +375,15 @@ class _Parser:
         elif tag == "include":
             if not is_scene:
                 raise self.err(c, "<include> is only allowed directly inside <scene>")
-            a = self.attrs(c, required=("filename",))
+            a = self.attrs(c, required=("filename",), optional=("name",))
             self.no_children(c)
             self.include(c, a["filename"], entries, base_dir)
+        elif tag == "path":
+            if not is_scene:
+                raise self.err(c, "<path> is only allowed directly inside <scene>")
+            a = self.attrs(c, required=("value",))
+            self.no_children(c)
+            self.add_search_path(c, a["value"], base_dir)
         elif tag in _TRANSFORM_OPS:
             raise self.err(c, "transform operations must be inside <transform>")
         else:
@@ -363,10 +406,25 @@ class _Parser:
             key = name if name is not None else ident
         entries.add(key, d, c.tag, c, self.err)
 
+    def add_search_path(self, c: _Node, value: str, base_dir: str):
+        """``<path value=..>``: put a directory (relative to this file's directory, else
+        found in the search path) in front of the current search path."""
+        path = value if os.path.isabs(value) else os.path.join(base_dir, value)
+        if not os.path.isdir(path):
+            path = self.lookup(self.search, value) or path
+        if not os.path.isdir(path):
+            raise self.err(c, f'folder "{value}" not found (looked in {base_dir} and the search path '
+                           f"{self.search})")
+        self.search.insert(0, os.path.abspath(path))
+
     def include(self, c: _Node, filename: str, entries: _Entries, base_dir: str):
-        """Merge the children of an included file's <scene> in place."""
-        path = filename if os.path.isabs(filename) else os.path.join(base_dir, filename)
-        path = os.path.abspath(path)
+        """Merge the children of an included file's <scene> in place. The file is looked
+        up in the including file's directory, then the search path; it is read with a
+        copy of the search path (its own ``<path>`` elements stay local to it)."""
+        search = [os.path.abspath(base_dir)] + self.search
+        path = self.lookup(search, filename)
+        if path is None:
+            path = os.path.abspath(filename if os.path.isabs(filename) else os.path.join(base_dir, filename))
         if path in self.include_stack:
             raise self.err(c, f'recursive include of "{filename}"')
         try:
@@ -382,8 +440,12 @@ class _Parser:
         if "version" in a:
             self.check_version(root, a["version"])
         self.include_stack.append(path)
-        self.children(root, entries, os.path.dirname(path), is_scene=True)
-        self.include_stack.pop()
+        outer, self.search = self.search, search
+        try:
+            self.children(root, entries, os.path.dirname(path), is_scene=True)
+        finally:
+            self.search = outer
+            self.include_stack.pop()
 
     # --------------------------------------------------------------- properties
     def property(self, c: _Node, base_dir: str):
@@ -409,8 +471,9 @@ class _Parser:
                     raise self.err(c, f'attribute "value": expected "true" or "false", '
                                    f'got "{v}"')
                 return a["name"], v.strip().lower() == "true"
-            if a["name"] == "filename":
-                v = self.resolve(base_dir, v)
+            if a["name"] == "filename" and not os.path.isabs(v):
+                v = _Filename(v)
+                v.fallback = base_dir
             return a["name"], v
         if tag in ("point", "vector"):
             a = self.attrs(c, required=("name",), optional=("value", "x", "y", "z"))

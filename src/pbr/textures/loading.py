@@ -36,31 +36,38 @@ from .kinds import (BASE_ONE, BASE_SIGMOID, BASE_TABLE, CONSTANT, OP_CHECKER, OP
 TEXTURE_TYPES = Registry("texture")
 
 
-def default_range(emitter: bool, unbounded: bool) -> Range:
+def default_range(emitter: bool, unbounded) -> Range:
     """The range of a spectrum-valued parameter that names none: radiance >= 0 for
     emitters, any finite value for unbounded spectra, else an albedo in [0, 1]."""
     return RADIANCE if emitter else (FINITE if unbounded else ALBEDO)
 
 
-def load_spectrum(loader, value, path: str, emitter: bool, unbounded: bool = False, valid: Range | None = None) -> int:
+def load_spectrum(loader, value, path: str, emitter: bool, unbounded=False, valid: Range | None = None,
+                  scalar: bool = False) -> int:
     """The texture slot of a spectrum-valued parameter ``value`` at key path ``path``: a
     float, or a dict ``{'type': 'rgb'|'spectrum'|'blackbody'|'d65'|'uniform'|
     'checkerboard'|'bitmap'|'scale'|'mix'|'mesh_attribute'|'ref', ...}`` as in Mitsuba
-    dicts. ``emitter``: the illuminant form; ``unbounded``: RGB values may exceed 1.
+    dicts. ``emitter``: the illuminant form; ``unbounded``: RGB values may exceed 1 (True:
+    pbrt-v4's unbounded upsampling; ``"mitsuba"``: a parameter Mitsuba reads as an unbounded
+    texture, whose ``rgb`` values it clamps to [0, 1], unless the ``rgb`` dict asks for
+    ``'upsampling': 'unbounded'``: see :func:`_rgb`).
     ``valid``: the range of the values (default: :func:`default_range`; the textures
     nested in a texture have their parent's, which the loader holds in
-    ``texture_range`` meanwhile). The texture keeps ``path`` as its key for
-    :func:`pbr.traverse` (``red.reflectance``)."""
+    ``texture_range`` meanwhile).
+    ``scalar``: the parameter is a float that Mitsuba reads with ``Texture::eval_1``
+    (roughness, weights, opacity, the principled BSDFs' lobe parameters), where its
+    ``checkerboard`` puts ``color0`` on the other squares (:func:`_checkerboard`).
+    The texture keeps ``path`` as its key for :func:`pbr.traverse` (``red.reflectance``)."""
     outer = getattr(loader, "texture_range", None)
     valid = valid or outer or default_range(emitter, unbounded)
     loader.texture_range = valid
     try:
-        return _load_spectrum(loader, value, path, emitter, unbounded, valid)
+        return _load_spectrum(loader, value, path, emitter, unbounded, valid, scalar)
     finally:
         loader.texture_range = outer
 
 
-def _load_spectrum(loader, value, path, emitter, unbounded, valid) -> int:
+def _load_spectrum(loader, value, path, emitter, unbounded, valid, scalar) -> int:
     textures = loader.textures
     if isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool):
         valid.check(value, path)
@@ -77,12 +84,15 @@ def _load_spectrum(loader, value, path, emitter, unbounded, valid) -> int:
     if p.type == "ref":
         obj = loader.resolve_ref(p.string("id"), path)
         p.finish()
-        return load_spectrum(loader, obj, path, emitter, unbounded)
+        return load_spectrum(loader, obj, path, emitter, unbounded, scalar=scalar)
     if p.type not in TEXTURE_TYPES:
         raise SceneError(f"{path}: unsupported texture/spectrum type {p.type!r} (supported: "
                          f"{TEXTURE_TYPES.supported()}, ref)")
     form = "illuminant" if emitter else ("unbounded" if unbounded else "albedo")
-    slot = TEXTURE_TYPES[p.type](loader, p, form, emitter, unbounded)
+    if p.type in _SCALAR_AWARE:
+        slot = TEXTURE_TYPES[p.type](loader, p, form, emitter, unbounded, scalar=scalar)
+    else:
+        slot = TEXTURE_TYPES[p.type](loader, p, form, emitter, unbounded)
     _check_texture(textures.items[slot], valid, path)
     return slot
 
@@ -125,6 +135,10 @@ def table_from_pairs(wl: np.ndarray, vals: np.ndarray, where: str) -> np.ndarray
     return np.where((grid >= wl[0]) & (grid <= wl[-1]), np.interp(grid, wl, vals), 0.0)
 
 
+# Loading functions that take ``scalar`` (the others ignore it: constants and bitmaps).
+_SCALAR_AWARE = ("checkerboard", "scale", "mix")
+
+
 # ---------------------------------------------------------------- constant spectra
 
 @TEXTURE_TYPES.register("rgb")
@@ -132,13 +146,23 @@ def _rgb(loader, p, form, emitter, unbounded):
     """``rgb``: an RGB colour, upsampled (Jakob-Hanika): albedo form in [0, 1], unbounded
     form, or illuminant form times D65 (emitters).
 
-    =====  =====  =======  =====================
-    name   type   default  meaning
-    =====  =====  =======  =====================
-    value  color  -        the colour (required)
-    =====  =====  =======  =====================
+    ==========  ======  =========  ====================================================
+    name        type    default    meaning
+    ==========  ======  =========  ====================================================
+    value       color   -          the colour (required)
+    upsampling  string  'clamped'  for the parameters Mitsuba reads as unbounded
+                                   textures (conductor ``eta``/``k``, roughness
+                                   ``alpha``): 'clamped' (Mitsuba's: the colour is
+                                   clamped to [0, 1] and upsampled as a reflectance)
+                                   or 'unbounded' (pbrt-v4's RGBUnboundedSpectrum:
+                                   ``2 max(rgb) S(rgb / (2 max(rgb)))``, values > 1 kept)
+    ==========  ======  =========  ====================================================
     """
     rgb = p.vector3("value")
+    if unbounded == "mitsuba":
+        loader.texture_range.check(np.asarray(rgb, np.float64), p.key("value"))   # before the clamp
+        if p.string("upsampling", "clamped", choices=("clamped", "unbounded")) == "clamped":
+            rgb, form = np.clip(rgb, 0.0, 1.0), "albedo"
     p.finish()
     return loader.textures.add(ConstantSpectrum(p.path, BASE_SIGMOID, form, mi.Color3f(*map(float, rgb))))
 
@@ -241,7 +265,7 @@ def _uniform(loader, p, form, emitter, unbounded):
 # -------------------------------------------------------------- spatially varying
 
 @TEXTURE_TYPES.register("checkerboard")
-def _checkerboard(loader, p, form, emitter, unbounded):
+def _checkerboard(loader, p, form, emitter, unbounded, scalar=False):
     """``checkerboard`` (Mitsuba's): two colours alternating on the unit squares of uv.
 
     ======  =========  ========  ============================
@@ -251,10 +275,17 @@ def _checkerboard(loader, p, form, emitter, unbounded):
     color1  texture    0.2       colour of the odd squares
     to_uv   transform  identity  texture-coordinate transform
     ======  =========  ========  ============================
+
+    The even squares are those where frac(u) > 1/2 and frac(v) > 1/2 agree. As in
+    Mitsuba, a checkerboard given to a float parameter (read with ``eval_1``: roughness,
+    blend weights, opacity, principled lobe weights) has ``color0`` on the odd squares.
     """
     textures = loader.textures
-    c0 = load_spectrum(loader, p.raw("color0", 0.4), p.key("color0"), emitter, unbounded)
-    c1 = load_spectrum(loader, p.raw("color1", 0.2), p.key("color1"), emitter, unbounded)
+    keys = ("color1", "color0") if scalar else ("color0", "color1")
+    c0 = load_spectrum(loader, p.raw(keys[0], {"color0": 0.4, "color1": 0.2}[keys[0]]), p.key(keys[0]), emitter,
+                       unbounded, scalar=scalar)
+    c1 = load_spectrum(loader, p.raw(keys[1], {"color0": 0.4, "color1": 0.2}[keys[1]]), p.key(keys[1]), emitter,
+                       unbounded, scalar=scalar)
     to_uv = p.transform("to_uv")
     p.finish()
     if textures.kind_of(c0) == CONSTANT and textures.kind_of(c1) == CONSTANT:
@@ -263,7 +294,7 @@ def _checkerboard(loader, p, form, emitter, unbounded):
 
 
 @TEXTURE_TYPES.register("scale")
-def _scale(loader, p, form, emitter, unbounded):
+def _scale(loader, p, form, emitter, unbounded, scalar=False):
     """``scale`` (pbrt-v4's): tex * scale. The factor is a plain (unbounded, never
     illuminant) spectrum, so that an emitter's scaled radiance carries D65 once.
 
@@ -276,15 +307,15 @@ def _scale(loader, p, form, emitter, unbounded):
     """
     # pbrt-v4's ``scale``: tex * scale. The factor is a plain (unbounded, never
     # illuminant) spectrum, so that an emitter's scaled radiance carries D65 once.
-    x = load_spectrum(loader, p.raw("tex", 1.0), p.key("tex"), emitter, unbounded)
+    x = load_spectrum(loader, p.raw("tex", 1.0), p.key("tex"), emitter, unbounded, scalar=scalar)
     m = load_spectrum(loader, p.raw("scale", 1.0), p.key("scale"), emitter=False, unbounded=True,
-                      valid=loader.texture_range.factor())
+                      valid=loader.texture_range.factor(), scalar=scalar)
     p.finish()
     return loader.textures.add(Composite(p.path, OP_SCALE, x, m=m))
 
 
 @TEXTURE_TYPES.register("mix")
-def _mix(loader, p, form, emitter, unbounded):
+def _mix(loader, p, form, emitter, unbounded, scalar=False):
     """``mix`` (pbrt-v4's texture): (1 - amount) tex1 + amount tex2.
 
     ======  =======  =======  ==============
@@ -296,8 +327,8 @@ def _mix(loader, p, form, emitter, unbounded):
     ======  =======  =======  ==============
     """
     # pbrt-v4's ``mix``: (1 - amount) tex1 + amount tex2 (defaults 0, 1 and 0.5).
-    x = load_spectrum(loader, p.raw("tex1", 0.0), p.key("tex1"), emitter, unbounded)
-    y = load_spectrum(loader, p.raw("tex2", 1.0), p.key("tex2"), emitter, unbounded)
+    x = load_spectrum(loader, p.raw("tex1", 0.0), p.key("tex1"), emitter, unbounded, scalar=scalar)
+    y = load_spectrum(loader, p.raw("tex2", 1.0), p.key("tex2"), emitter, unbounded, scalar=scalar)
     m = load_spectrum(loader, p.raw("amount", 0.5), p.key("amount"), emitter=False, valid=UNIT)
     p.finish()
     return loader.textures.add(Composite(p.path, OP_MIX, x, y, m))
@@ -354,6 +385,31 @@ def _bitmap(loader, p, form, emitter, unbounded):
     if form == "albedo":
         rgb = np.clip(rgb, 0.0, 1.0)
     return loader.textures.add(Bitmap(p.path, rgb, filter_type, wrap_mode, to_uv, form, raw_values))
+
+
+@TEXTURE_TYPES.register("rawconstant")
+def _rawconstant(loader, p, form, emitter, unbounded):
+    """``rawconstant`` (Mitsuba's): a constant used as stored, without colour conversion
+    or range checks: one value (a plain spectrum equal to it) or a 3-vector (e.g. a normal
+    map's flat normal (0.5, 0.5, 1); evaluated as a colour, pbr upsamples it, where
+    Mitsuba's spectral variants refuse).
+
+    =====  ============  =======  ==========================
+    name   type          default  meaning
+    =====  ============  =======  ==========================
+    value  float|vector  -        the value(s) (required)
+    =====  ============  =======  ==========================
+    """
+    v = p.raw("value")
+    if isinstance(v, (int, float, np.floating, np.integer)) and not isinstance(v, bool):
+        p.float("value")
+        p.finish()
+        return loader.textures.add(ConstantSpectrum(p.path, BASE_ONE, value=mi.Float(float(v))))
+    vec = p.vector3("value").astype(np.float32)
+    p.finish()
+    texel = vec.reshape(1, 1, 3)
+    rgb = np.clip(texel, 0.0, 1.0) if form == "albedo" else texel
+    return loader.textures.add(Bitmap(p.path, rgb, "nearest", "clamp", np.eye(4), form, texel.copy()))
 
 
 @TEXTURE_TYPES.register("mesh_attribute")
