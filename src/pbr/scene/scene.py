@@ -50,8 +50,8 @@ class Scene:
         self.shape_ids = shapes.ids
         # Mitsuba's shapes take pbr's ids (Geometry named them by position), so that
         # scene.shapes()[i].id() and mi.traverse keys of the geometry read as the scene's.
-        for i, sid in enumerate(shapes.ids):
-            self.geometry.mi_shape(i).set_id(str(sid))
+        for i in self.top_level_shapes():
+            self.geometry.mi_shape(i).set_id(str(shapes.ids[i]))
         self.shape_emitter = list(shapes.light)   # emitter index + 1 per shape (0: none)
         self.media_of_shape = list(shapes.media)  # [interior, exterior] medium index + 1
         self.shape_paths = shapes.paths        # key paths, e.g. "scene.red-wall"
@@ -97,9 +97,14 @@ class Scene:
 
     # -- Mitsuba's Scene methods ------------------------------------------------------
     def shapes(self) -> list:
-        """The shapes in scene order, as :class:`~.views.ShapeView` (Mitsuba's shape
-        object, with pbr's emitter and media)."""
-        return [ShapeView(self, i) for i in range(len(self.shape_ids))]
+        """The top-level shapes in scene order, as :class:`~.views.ShapeView` (Mitsuba's
+        shape object, with pbr's emitter and media)."""
+        return [ShapeView(self, i) for i in self.top_level_shapes()]
+
+    def top_level_shapes(self) -> list:
+        """Indices of the shapes that are not inside a ``shapegroup`` (those are Mitsuba's
+        ``scene.shapes()``; a group's shapes are reached through its instances)."""
+        return [i for i in range(len(self.shape_ids)) if self.geometry.mi_index[i] >= 0]
 
     def emitters(self) -> list:
         """The emitters in scene order (area emitters where their shape was declared),
