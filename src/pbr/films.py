@@ -8,7 +8,7 @@ image only, as Mitsuba's film does."""
 from __future__ import annotations
 
 from .filters import FILTERS, GaussianFilter
-from .plugins.props import Props
+from .plugins.props import Props, did_you_mean
 from .plugins.registry import Registry
 
 FILMS = Registry("film")
@@ -58,8 +58,8 @@ class HDRFilm:
             if child["type"] in FILTERS:
                 self.rfilter = FILTERS[child["type"]](props.child(key))
             else:
-                raise props.error(key, f"unsupported reconstruction filter {child['type']!r} "
-                                       f"(supported: {', '.join(FILTERS)})")
+                raise props.error(key, f"unsupported reconstruction filter {child['type']!r}"
+                                       f"{did_you_mean(child['type'], FILTERS)} (supported: {', '.join(FILTERS)})")
         props.finish()
 
     @property

@@ -26,7 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import dispatch
-from .plugins.props import Props, SceneError
+from .plugins.props import Props, SceneError, did_you_mean
 from .textures.meshattr import attach, file_attributes
 
 # Parameters each shape type understands (beyond bsdf/emitter/id).
@@ -163,7 +163,8 @@ def shape_to_mitsuba(props: Props, resolve_path):
     """The Mitsuba object or dict for one shape (geometry only, no BSDF/emitter)."""
     t = props.type
     if t not in SHAPE_PARAMS:
-        raise props.error(None, f"unsupported shape type {t!r} (supported: {', '.join(SHAPE_PARAMS)})")
+        raise props.error(None, f"unsupported shape type {t!r}{did_you_mean(t, SHAPE_PARAMS)} "
+                                        f"(supported: {', '.join(SHAPE_PARAMS)})")
     if t in MESH_FILES:
         path = resolve_path(props.string("filename"), props.key("filename"))
         return load_mesh_file(props, path)

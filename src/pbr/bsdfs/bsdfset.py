@@ -13,7 +13,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .. import dispatch
-from ..plugins.props import UNIT, SceneError
+from ..plugins.props import UNIT, SceneError, did_you_mean
 from ..spectrum import luminance_rgb
 from ..textures import load_spectrum
 from . import perturb
@@ -45,7 +45,8 @@ class BSDFSet:
         if t in WRAPPERS:
             return getattr(self, WRAPPERS[t])(loader, props)
         if t not in BSDF_TYPES:
-            raise props.error(None, f"unsupported BSDF type {t!r} (supported: {', '.join(sorted(bsdf_names()))})")
+            raise props.error(None, f"unsupported BSDF type {t!r}{did_you_mean(t, bsdf_names())} "
+                                        f"(supported: {', '.join(sorted(bsdf_names()))})")
         fam = self.families.setdefault(t, BSDF_TYPES[t]())
         local = fam.add(loader, props)
         self.entries.append((t, local, NO_BACK, NO_BACK))

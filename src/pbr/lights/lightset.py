@@ -13,6 +13,7 @@ import drjit as dr
 import mitsuba as mi
 
 from .. import dispatch
+from ..plugins.props import did_you_mean
 from ..plugins.tables import own_table_memory
 from .area import AreaLight
 from .base import LIGHT_TYPES, LightSample, LightType, LeSample
@@ -40,7 +41,8 @@ class LightSet:
         """Parse one emitter; returns its global light index."""
         t = props.type
         if t not in LIGHT_TYPES:
-            raise props.error(None, f"unsupported emitter type {t!r} (supported: {LIGHT_TYPES.supported()})")
+            raise props.error(None, f"unsupported emitter type {t!r}{did_you_mean(t, LIGHT_TYPES)} "
+                                        f"(supported: {LIGHT_TYPES.supported()})")
         surface = t == "area" or getattr(LIGHT_TYPES[t], "surface", False)  # attached to a shape
         if surface != (shape_index is not None):
             raise props.error(None, f"a {t!r} emitter must be attached to a shape" if surface

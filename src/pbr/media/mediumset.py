@@ -29,7 +29,7 @@ import numpy as np
 from ..backend import Struct
 from ..phase import HG, PHASE_TYPES, G_MAX, phase_eval, phase_sample
 from ..plugins.params import ParamOwner, param_table
-from ..plugins.props import ALBEDO, HG_ASYMMETRY, NONNEGATIVE, Props, Range, SceneError
+from ..plugins.props import ALBEDO, HG_ASYMMETRY, NONNEGATIVE, Props, Range, SceneError, did_you_mean
 from ..plugins.registry import Registry
 from ..textures import CONSTANT, load_spectrum
 from .grid import GridTable, MAJORANT_RES, as_grid, cell_maxima, read_vol
@@ -99,7 +99,8 @@ class MediumSet:
         """
         m = _Medium(props.path)
         if props.type not in MEDIUM_TYPES:
-            raise props.error(None, f"unknown medium type {props.type!r} (supported: {MEDIUM_TYPES.supported()})")
+            raise props.error(None, f"unknown medium type {props.type!r}{did_you_mean(props.type, MEDIUM_TYPES)} "
+                                        f"(supported: {MEDIUM_TYPES.supported()})")
         first_slot = len(loader.textures.items)
         getattr(self, MEDIUM_TYPES[props.type])(loader, props, m)
         self._emission(loader, props, m)

@@ -23,6 +23,18 @@ class SceneError(ValueError):
     """Invalid scene description; the message starts with the offending key path."""
 
 
+# Every plugin type name pbr knows (filled in by the scene loader, which imports all the
+# families), for messages about a nested plugin of an unknown type.
+KNOWN_TYPES: set[str] = set()
+
+
+def did_you_mean(name, choices) -> str:
+    """`` (did you mean 'x'?)`` for the known name closest to a misspelt ``name``, or ''."""
+    import difflib
+    close = difflib.get_close_matches(str(name), [str(c) for c in choices], n=1, cutoff=0.6)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
@@ -128,7 +140,11 @@ class Props:
         unknown = [k for k in self.d if k not in self._used]
         if unknown:
             k = unknown[0]
-            raise SceneError(f"{self.key(k)}: unknown parameter {k!r} for plugin type {self.type!r}")
+            t = self.d[k].get("type") if isinstance(self.d[k], dict) else None
+            if isinstance(t, str) and KNOWN_TYPES and t not in KNOWN_TYPES:   # a misspelt nested plugin
+                raise SceneError(f"{self.key(k)}: unknown plugin type {t!r}{did_you_mean(t, KNOWN_TYPES)}")
+            raise SceneError(f"{self.key(k)}: unknown parameter {k!r} for plugin type {self.type!r}"
+                             f"{did_you_mean(k, self._used)}")
 
     # -- typed getters --------------------------------------------------------------
     def float(self, name: str, default=None, min=None, max=None, valid: Range | None = None) -> float:
@@ -172,7 +188,8 @@ class Props:
         if not isinstance(v, str):
             raise self.error(name, f"expected a string, got {v!r}")
         if choices is not None and v not in choices:
-            raise self.error(name, f"expected one of {', '.join(map(repr, choices))}, got {v!r}")
+            raise self.error(name, f"expected one of {', '.join(map(repr, choices))}, got {v!r}"
+                                   f"{did_you_mean(v, choices)}")
         return v
 
     def vector3(self, name: str, default=None) -> np.ndarray:

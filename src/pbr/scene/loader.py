@@ -19,11 +19,15 @@ import os
 from .. import backend
 from ..bsdfs import BSDFSet, bsdf_names
 from ..cameras import SENSORS
+from ..films import FILMS
+from ..filters import FILTERS
 from ..geometry import CURVE_FILES, SHAPE_PARAMS, build_shape, shape_to_mitsuba
 from ..integrators import INTEGRATORS
 from ..lights import LIGHT_TYPES, LightSet
 from ..media import MEDIUM_TYPES, MediumSet
-from ..plugins.props import FINITE, Props, SceneError
+from ..phase import PHASE_TYPES
+from ..plugins.props import FINITE, KNOWN_TYPES, Props, SceneError, did_you_mean
+from ..samplers import SAMPLERS
 from ..textures import TEXTURE_TYPES, TextureSet, load_spectrum
 from .objects import load_object
 from .params import mitsuba_key_paths
@@ -32,6 +36,11 @@ from .xml import locate, parse_file_lines
 
 # Emitter types a shape can carry.
 SURFACE_EMITTERS = ("area", "directionalarea")
+
+# Every type name the loader accepts, for messages about misspelt nested plugins.
+KNOWN_TYPES.update(SENSORS, INTEGRATORS, SHAPE_PARAMS, TEXTURE_TYPES, bsdf_names(), LIGHT_TYPES, MEDIUM_TYPES,
+                   FILMS, FILTERS, PHASE_TYPES, SAMPLERS,
+                   {"shapegroup", "instance", "gridvolume", "constvolume", "ref"})
 
 
 class Loader:
@@ -264,7 +273,7 @@ class Loader:
             elif t in MEDIUM_TYPES:
                 self.medium(v, path)
             else:
-                raise SceneError(f"{path}: unknown plugin type {t!r}")
+                raise SceneError(f"{path}: unknown plugin type {t!r}{did_you_mean(t, KNOWN_TYPES)}")
         for key, v in instances:   # after every shapegroup, wherever it appears
             self._instance(key, v, shapes)
         if len(shapes) == len(shapes.groups) and not shapes.instances:

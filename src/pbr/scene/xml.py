@@ -38,10 +38,13 @@ from ..bsdfs import bsdf_names
 from ..cameras import SENSORS
 from ..films import FILMS
 from ..filters import FILTERS
+from ..geometry import SHAPE_PARAMS
 from ..integrators import INTEGRATORS
 from ..lights import LIGHT_TYPES
 from ..media import MEDIUM_TYPES
 from ..phase import PHASE_TYPES
+from ..samplers import SAMPLERS
+from ..textures import TEXTURE_TYPES
 
 __all__ = ["XMLError", "parse_file", "parse_file_lines", "parse_string"]
 
@@ -304,6 +307,7 @@ class _Parser:
             d = {"type": "scene"}
         else:
             a = self.attrs(node, required=("type",), optional=("id", "name"))
+            self.check_tag(node, a["type"])
             d = {"type": a["type"]}
         if not is_root and "id" in a:
             d["id"] = a["id"]
@@ -311,6 +315,20 @@ class _Parser:
         self.children(node, entries, base_dir, is_scene=node.tag == "scene")
         self.nodes[id(entries.d)] = entries.nodes
         return entries.d
+
+    def check_tag(self, node: _Node, t: str) -> None:
+        """A type pbr knows only under other tags is an error here (``<sensor
+        type="rectangle">``, ``<bsdf type="area">``): Mitsuba refuses such a mismatch.
+        Types pbr does not know at all are left to the loader's message."""
+        families = _tag_types()
+        if node.tag not in families or t in families[node.tag]:
+            return
+        owners = [tag for tag, types in families.items() if t in types and tag != "spectrum"]
+        if owners:
+            def a(w):
+                return ("an " if w[0] in "aeiou" else "a ") + w
+            raise self.err(node, f"type {t!r} is {a(' or '.join(owners))} type, not {a(node.tag)} type "
+                                 f"(write <{owners[0]} type=\"{t}\">)")
 
     def lines(self, d: dict, path: str = "scene", out: dict | None = None) -> dict:
         """Key path (``scene.<id>.<name>...``, as the loader names them) -> ``file:line``
@@ -617,6 +635,15 @@ def _parse(text, file: str, base_dir: str, kwargs: dict) -> dict:
 
 
 # ----------------------------------------------------------------------------- writing
+
+def _tag_types() -> dict:
+    """Object tag -> the type names pbr knows under it."""
+    return {"shape": set(SHAPE_PARAMS) | {"shapegroup", "instance"}, "bsdf": set(bsdf_names()),
+            "emitter": set(LIGHT_TYPES), "sensor": set(SENSORS), "film": set(FILMS), "sampler": set(SAMPLERS),
+            "rfilter": set(FILTERS), "integrator": set(INTEGRATORS), "texture": set(TEXTURE_TYPES),
+            "spectrum": set(TEXTURE_TYPES), "medium": set(MEDIUM_TYPES), "phase": set(PHASE_TYPES),
+            "volume": {"gridvolume", "constvolume"}}
+
 
 def _xml_tags():
     """(XML tag, type names) in the order ``to_xml`` tries them (other types: shapes).

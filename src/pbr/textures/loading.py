@@ -25,7 +25,7 @@ import numpy as np
 from .. import spectrum as spec
 from ..image import linear_to_srgb, read_image
 from ..plugins.params import check_params
-from ..plugins.props import ALBEDO, FINITE, RADIANCE, UNIT, Props, Range, SceneError
+from ..plugins.props import ALBEDO, FINITE, RADIANCE, UNIT, Props, Range, SceneError, did_you_mean
 from ..plugins.registry import Registry
 from . import meshattr
 from .kinds import (BASE_ONE, BASE_SIGMOID, BASE_TABLE, CONSTANT, OP_CHECKER, OP_MIX, OP_SCALE, TAB_N, Bitmap,
@@ -86,8 +86,8 @@ def _load_spectrum(loader, value, path, emitter, unbounded, valid, scalar) -> in
         p.finish()
         return load_spectrum(loader, obj, path, emitter, unbounded, scalar=scalar)
     if p.type not in TEXTURE_TYPES:
-        raise SceneError(f"{path}: unsupported texture/spectrum type {p.type!r} (supported: "
-                         f"{TEXTURE_TYPES.supported()}, ref)")
+        raise SceneError(f"{path}: unsupported texture/spectrum type {p.type!r}"
+                         f"{did_you_mean(p.type, [*TEXTURE_TYPES, 'ref'])} (supported: {TEXTURE_TYPES.supported()}, ref)")
     form = "illuminant" if emitter else ("unbounded" if unbounded else "albedo")
     if p.type in _SCALAR_AWARE:
         slot = TEXTURE_TYPES[p.type](loader, p, form, emitter, unbounded, scalar=scalar)
