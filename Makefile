@@ -4,7 +4,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test test-cuda test-slow bench clean
+.PHONY: demo test test-cuda test-slow bench notebooks clean
 
 $(STAMP): pyproject.toml setup.py
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -28,6 +28,11 @@ test-slow: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m pip install -q -e '.[test,bench]'
 	$(PY) benchmarks/bench_cornell.py
+
+# Jupyter Lab on notebooks/ (installs the 'notebooks' extra first).
+notebooks: $(STAMP)
+	$(PY) -m pip install -q -e '.[test,notebooks]'
+	$(VENV)/bin/jupyter lab notebooks
 
 clean:
 	rm -rf out .pytest_cache

@@ -110,7 +110,8 @@ def run_one(path: str, text: str, tmpdir: str, res: int = 8) -> tuple[str, str]:
     with open(f, "w") as fh:
         fh.write(text)
     try:
-        defaults = {k: v for k, v in (("res", res), ("spp", 1)) if f'<default name="{k}"' in text}
+        defaults = {k: v for k, v in (("res", res), ("width", res), ("height", res), ("spp", 1))
+                    if f'<default name="{k}"' in text}
         scene = pbr.load_file(f, **defaults)
     except (SceneError, XMLError, FileNotFoundError) as e:
         msg = str(e)

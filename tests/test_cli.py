@@ -180,3 +180,40 @@ def test_python_dash_m_entry(tmp_path):
     assert r.returncode == 2
     assert r.stderr.startswith("pbr: error: scene file not found")
     assert "Traceback" not in r.stderr
+
+
+def test_version(capsys):
+    with pytest.raises(SystemExit) as e:
+        cli.build_parser().parse_args(["--version"])
+    assert e.value.code == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"pbr {pbr.__version__} (Dr.Jit ") and "Mitsuba 3." in out
+
+
+@pytest.mark.parametrize("args, size", [(["--res", "20"], (20, 15)), (["--width", "40"], (40, 30)),
+                                        (["--height", "12"], (16, 12)), (["--width", "9", "--height", "5"], (9, 5))])
+def test_film_size_options_apply_to_any_scene(tmp_path, monkeypatch, args, size):
+    """A scene file without <default>s for its size (the gallery's film is 480 x 360)."""
+    monkeypatch.chdir(tmp_path)
+    scene = os.path.join(os.path.dirname(os.path.dirname(__file__)), "scenes", "materials_gallery.xml")
+    d = {}
+    monkeypatch.setattr(pbr, "render", lambda s, **k: d.setdefault("size", s.sensors[0].film.size) and
+                        np.zeros((size[1], size[0], 3), np.float32))
+    assert cli.main(["render", scene, "-o", "g.exr", *args]) == 0
+    assert tuple(d["size"]) == size
+
+
+@pytest.mark.parametrize("args, message", [(["--res", "16", "--width", "3"], "give either --res or --width/--height"),
+                                           (["--height", "0"], "--height must be a positive integer, got 0")])
+def test_bad_film_size_options(fake, capsys, args, message):
+    assert cli.main(["render", *args]) == 2
+    assert f"pbr: error: {message}" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("out", ["/proc/no/such.exr", "/proc/such.exr", "/proc/such.png"])
+def test_write_failure_is_an_error_line(fake, capsys, out):
+    """A folder that cannot be made (OSError) or a file the writer cannot open (OpenEXR's
+    and Mitsuba's RuntimeError)."""
+    assert cli.main(["render", "-o", out]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"pbr: error: cannot write {out}") and "Traceback" not in err

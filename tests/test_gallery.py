@@ -82,8 +82,11 @@ def test_xml_is_valid_mitsuba_xml():
 def test_scene_file_is_current():
     """scenes/materials_gallery.xml is generated from pbr.materials_gallery() by
     scenes/data/make_gallery_data.py, with the data files named relative to it."""
-    text = open(SCENE_FILE).read()
-    assert to_xml(pbr.materials_gallery(320, 64), base_dir=SCENES) in text
+    assert open(SCENE_FILE).read() == make_data().scene_text(SCENE_FILE)
+    # ... which is to_xml of the dict, with <default>s for its size and sample count.
+    d = parse_string(open(SCENE_FILE).read(), base_dir=SCENES)
+    assert d["sensor"]["film"]["width"] == 320 and d["sensor"]["sampler"]["sample_count"] == 64
+    assert parse_string(open(SCENE_FILE).read(), base_dir=SCENES, width=64, spp=2)["sensor"]["film"]["width"] == 64
 
 
 def test_scene_file_renders_like_the_dict():

@@ -10,7 +10,7 @@ Public API (see README.md)::
     params = pbr.traverse(scene)
 """
 from .backend import set_backend, get_backend, BackendError, VariantWarning  # noqa: F401  (configures libLLVM first)
-from .scene import load_dict, load_file, traverse, SceneError, SceneParameters  # noqa: F401
+from .scene import load_dict, load_file, load_string, traverse, SceneError, SceneParameters  # noqa: F401
 from .scenes import cornell_box, materials_gallery  # noqa: F401
 from .render import render  # noqa: F401
 from .freeze import freeze  # noqa: F401

@@ -16,7 +16,10 @@ import numpy as np
 
 import pbr
 
+from .cameras import SENSORS
+from .films import FILMS
 from .image import TONEMAPS, WRITE_EXTENSIONS, write_image
+from .scene.loader import load_xml_file
 
 EXIT_ERROR = 2
 
@@ -39,9 +42,45 @@ def _define(text: str):
     return name, _parse_value(value)
 
 
+def _version() -> str:
+    import drjit
+    import mitsuba
+    return f"pbr {pbr.__version__} (Dr.Jit {drjit.__version__}, Mitsuba {mitsuba.__version__})"
+
+
+def _film_size(args):
+    """A function that sets every sensor film's size of a scene dict from --res/--width/
+    --height (None when none is given). Mitsuba's default film is 768 x 576."""
+    if args.res is None and args.width is None and args.height is None:
+        return None
+    if args.res is not None and (args.width is not None or args.height is not None):
+        raise UsageError("give either --res or --width/--height")
+    for name in ("res", "width", "height"):
+        v = getattr(args, name)
+        if v is not None and v <= 0:
+            raise UsageError(f"--{name} must be a positive integer, got {v}")
+
+    def edit(d):
+        for sensor in (v for v in d.values() if isinstance(v, dict) and v.get("type") in SENSORS):
+            films = [f for f in sensor.values() if isinstance(f, dict) and f.get("type") in FILMS]
+            if not films:
+                films = [sensor.setdefault("film", {"type": "hdrfilm"})]
+            for film in films:
+                w, h = int(film.get("width", 768)), int(film.get("height", 576))
+                width = args.res if args.res is not None else args.width
+                if width is not None and args.height is not None:
+                    film["width"], film["height"] = width, args.height
+                elif width is not None:
+                    film["width"], film["height"] = width, max(1, round(width * h / w))
+                else:
+                    film["width"], film["height"] = max(1, round(args.height * w / h)), args.height
+    return edit
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="pbr", description="pbr: a spectral, differentiable renderer on Dr.Jit.")
+    parser.add_argument("--version", action="version", version=_version())
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     r = sub.add_parser("render", help="render a scene to an image",
@@ -53,6 +92,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--png", metavar="PNGPATH", help="also write a tone-mapped sRGB PNG here")
     r.add_argument("--spp", type=int, default=0,
                    help="samples per pixel (0: the scene's own sample count)")
+    r.add_argument("--res", type=int, metavar="N",
+                   help="image width N, the height following the film's aspect ratio (any scene)")
+    r.add_argument("--width", type=int, help="image width (with --height: both exactly; alone: aspect kept)")
+    r.add_argument("--height", type=int, help="image height (alone: aspect kept)")
     r.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     r.add_argument("--backend", choices=("auto", "llvm", "cuda"), default="auto",
                    help="Dr.Jit backend (default auto: CUDA if usable, else LLVM)")
@@ -89,11 +132,17 @@ def _load(args):
                          "(the built-in Cornell box takes no parameters)")
     if args.scene is not None and not os.path.isfile(args.scene):
         raise UsageError(f"scene file not found: {args.scene}")
+    edit = _film_size(args)
     try:
         pbr.set_backend(args.backend)
         if args.scene is None:
-            return pbr.load_dict(pbr.cornell_box())
-        return pbr.load_file(args.scene, **dict(args.defines))
+            d = pbr.cornell_box()
+            if edit:
+                edit(d)
+            return pbr.load_dict(d)
+        if edit is None:
+            return pbr.load_file(args.scene, **dict(args.defines))
+        return load_xml_file(args.scene, edit, **dict(args.defines))
     except (ValueError, FileNotFoundError, pbr.BackendError) as e:
         raise UsageError(str(e)) from e
 
@@ -132,7 +181,7 @@ def _render(args) -> int:
         except ValueError as e:  # unsupported extension, NaN/Inf pixels
             raise UsageError(str(e)) from e
         except OSError as e:
-            raise UsageError(f"cannot write {path}: {e.strerror or e}") from e
+            raise UsageError(str(e) if e.strerror is None else f"cannot write {path}: {e.strerror}") from e
         written.append(path)
 
     h, w = img.shape[:2]

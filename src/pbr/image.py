@@ -134,7 +134,8 @@ def write_image(path, img, tonemap: str = "clamp", exposure: float = 0.0,
     ``.png``: 8-bit sRGB: ``x * 2**exposure``, then ``tonemap`` ('clamp': clip to [0, 1];
     'reinhard': ``x / (1 + x)`` per channel), then the exact sRGB OETF.
     Parent directories are created. Non-finite pixels raise ValueError (they usually
-    mean a bug) unless ``allow_nonfinite=True``. Returns the path written.
+    mean a bug) unless ``allow_nonfinite=True``; a file that cannot be written raises
+    OSError. Returns the path written.
     """
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
@@ -148,16 +149,19 @@ def write_image(path, img, tonemap: str = "clamp", exposure: float = 0.0,
     parent = os.path.dirname(path)
     if parent:
         os.makedirs(parent, exist_ok=True)
-    if ext == ".exr":
-        import OpenEXR
+    try:
+        if ext == ".exr":
+            import OpenEXR
 
-        names = _EXR_NAMES.get(a.shape[2]) or tuple(f"C{i}" for i in range(a.shape[2]))
-        channels = {n: np.ascontiguousarray(a[:, :, i]) for i, n in enumerate(names)}
-        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-        with OpenEXR.File(header, channels) as f:
-            f.write(path)
-    else:
-        _png_bitmap(_encode_8bit(a, tonemap, exposure)).write(path)
+            names = _EXR_NAMES.get(a.shape[2]) or tuple(f"C{i}" for i in range(a.shape[2]))
+            channels = {n: np.ascontiguousarray(a[:, :, i]) for i, n in enumerate(names)}
+            header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+            with OpenEXR.File(header, channels) as f:
+                f.write(path)
+        else:
+            _png_bitmap(_encode_8bit(a, tonemap, exposure)).write(path)
+    except RuntimeError as e:   # the writers (OpenEXR, Mitsuba's Bitmap) report I/O failures so
+        raise OSError(f"cannot write {path}: {str(e).strip()}") from None
     return path
 
 

@@ -32,7 +32,7 @@ from ..textures import TEXTURE_TYPES, TextureSet, load_spectrum
 from .objects import load_object
 from .params import mitsuba_key_paths
 from .scene import Scene, ShapeList
-from .xml import locate, parse_file_lines
+from .xml import locate, parse_file_lines, parse_string
 
 # Emitter types a shape can carry.
 SURFACE_EMITTERS = ("area", "directionalarea")
@@ -302,6 +302,20 @@ def load_dict(d: dict, base_dir: str | None = None, parallel: bool = True, optim
 def load_file(path: str, parallel: bool = True, optimize: bool = True, **kwargs):
     """Load a Mitsuba XML scene; keyword arguments override its ``<default>`` values.
     ``parallel`` and ``optimize`` are Mitsuba's keywords, ignored (see :func:`load_dict`)."""
+    return load_xml_file(path, None, **kwargs)
+
+
+@backend.uses_pbr_variant
+def load_string(text: str, parallel: bool = True, optimize: bool = True, **kwargs):
+    """Load a scene from Mitsuba XML text (``mi.load_string``); keyword arguments override
+    its ``<default>`` values; relative file names are looked up in the working directory."""
+    backend.ensure()   # the XML reader builds Mitsuba transforms: a variant must be set
+    return load_dict(parse_string(text, **kwargs))
+
+
+def load_xml_file(path: str, edit=None, **kwargs):
+    """:func:`load_file`, with ``edit(d)`` applied to the parsed scene dict before it is
+    loaded (the command line's film-size options); errors name ``file:line``."""
     if not os.path.exists(path):
         raise FileNotFoundError(f"{path}: scene file not found")
     ext = os.path.splitext(path)[1].lower()
@@ -309,6 +323,8 @@ def load_file(path: str, parallel: bool = True, optimize: bool = True, **kwargs)
         raise SceneError(f"{path}: unsupported scene format {ext!r} (supported: .xml)")
     backend.ensure()   # the XML reader builds Mitsuba transforms: a variant must be set
     d, lines = parse_file_lines(path, **kwargs)
+    if edit is not None:
+        edit(d)
     try:
         return load_dict(d, base_dir=os.path.dirname(os.path.abspath(path)))
     except SceneError as e:     # name the XML element too
