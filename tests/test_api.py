@@ -1,3 +1,5 @@
+import os
+
 import numpy as np
 import pytest
 import mitsuba as mi
@@ -168,3 +170,12 @@ def test_largest_seed_and_numpy_counts_are_accepted():
     a = np.asarray(pbr.render(scene, seed=2**32 - 1, spp=np.int64(4)))
     b = np.asarray(pbr.render(scene, seed=0, spp=4))
     assert a.shape == b.shape and not np.array_equal(a, b)
+
+
+def test_load_string_equals_load_file():
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes", "cornell_box.xml")
+    a = np.asarray(pbr.render(pbr.load_string(open(path).read(), res=8, spp=2), seed=1))
+    b = np.asarray(pbr.render(pbr.load_file(path, res=8, spp=2), seed=1))
+    assert a.shape == (8, 8, 3) and np.array_equal(a, b)
+    with pytest.raises(pbr.scene.xml.XMLError, match="<string>:1:"):
+        pbr.load_string("<scene version='3.0.0'><foo/></scene>")
