@@ -117,6 +117,16 @@ class ProjectiveCamera:
             return pos
         return mi.Point2f((pos.x - ox) / sx, (pos.y - oy) / sy)
 
+    # Light tracing needs a pinhole's importance; the pinhole camera defines these.
+    def We(self, ray):
+        raise self._unsupported("importance evaluation (We)")
+
+    def pdf_We(self, ray):
+        raise self._unsupported("importance densities (pdf_We)")
+
+    def sample_Wi(self, ref_p, u=None):
+        raise self._unsupported("connections to the camera (sample_Wi)")
+
     def _unsupported(self, what: str):
         return NotImplementedError(f"the {self.name!r} camera does not support {what} (light-tracing "
                                    "integrators such as ptracer, lightpath and bdpt need a 'perspective' camera)")
@@ -283,14 +293,8 @@ class ThinLensCamera(PerspectiveCamera):
         d = dr.normalize(mi.Vector3f(focus.x - lens.x, focus.y - lens.y, focus.z))
         return self._ray(lens, d)
 
-    def We(self, ray):
-        raise self._unsupported("importance evaluation (We)")
-
-    def pdf_We(self, ray):
-        raise self._unsupported("importance densities (pdf_We)")
-
-    def sample_Wi(self, ref_p, u=None):
-        raise self._unsupported("connections to the camera (sample_Wi)")
+    # A lens is not a pinhole: no importance for light tracing (ProjectiveCamera's refusals).
+    We, pdf_We, sample_Wi = ProjectiveCamera.We, ProjectiveCamera.pdf_We, ProjectiveCamera.sample_Wi
 
 
 @SENSORS.register("orthographic")
@@ -325,15 +329,6 @@ class OrthographicCamera(ProjectiveCamera):
         m = self.to_world.tolist()
         o = mi.Point3f(*[m[r][0] * x + m[r][1] * y + (m[r][2] * self.near_clip + m[r][3]) for r in range(3)])
         return mi.Ray3f(o, mi.Vector3f(*self._dir), self.far_clip - self.near_clip, 0.0, mi.Spectrum(0))
-
-    def We(self, ray):
-        raise self._unsupported("importance evaluation (We)")
-
-    def pdf_We(self, ray):
-        raise self._unsupported("importance densities (pdf_We)")
-
-    def sample_Wi(self, ref_p, u=None):
-        raise self._unsupported("connections to the camera (sample_Wi)")
 
 
 class CameraWiSample(Struct):

@@ -290,15 +290,8 @@ class PRBVolPathIntegrator(_MediumAware):
             # -- continue: BSDF or phase function sampling ----------------------------------------
             wi_next, pdf_next, w_next, delta_next = volume.sample_direction(media, medium, ray, si, bs, sc, rng)
             if bsdfs.has_null_lobes:
-                # Crossed by the null lobe: on as through a null surface (no vertex, the
-                # MIS state of the last vertex kept), weighted by the lobe (its weight's
-                # derivative, from specular_transmittance only, is not propagated).
-                crossed = lobe & bs.null & (bs.pdf > 0)
-                beta[crossed] = beta * bs.weight
-                go_on &= ~crossed
-                rs &= ~crossed
-                at_vertex &= ~crossed
-                skip |= crossed
+                # (The lobe weight's derivative, from specular_transmittance only, is not propagated.)
+                crossed = volume.cross_null_lobe(bs, lobe, beta, go_on, rs, at_vertex, skip)
             cont = go_on & (pdf_next > 0)
             if not primal:
                 with dr.resume_grad():

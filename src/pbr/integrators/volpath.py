@@ -283,14 +283,7 @@ class VolPathIntegrator(_MediumAware):
             # -- continue: sample the BSDF or the phase function -------------------------
             wi_next, pdf_next, w_next, delta_next = volume.sample_direction(media, medium, ray, si, bs, sc, rng)
             if bsdfs.has_null_lobes:
-                # Crossed by the null lobe: on as through a null surface (no vertex, the
-                # MIS state of the last vertex kept), weighted by the lobe.
-                crossed = lobe & bs.null & (bs.pdf > 0)
-                beta[crossed] = beta * bs.weight
-                go_on &= ~crossed
-                rs &= ~crossed
-                at_vertex &= ~crossed
-                skip |= crossed
+                volume.cross_null_lobe(bs, lobe, beta, go_on, rs, at_vertex, skip)
             cont = go_on & (pdf_next > 0)
             if bsdfs.dispersive:
                 term = rs & bs.terminate & ~terminated

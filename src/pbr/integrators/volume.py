@@ -189,6 +189,21 @@ def shadow_ray(scene, shape, si, ls, sc, p_sc, medium, active):
     return sray, medium
 
 
+def cross_null_lobe(bs, lobe, beta, go_on, rs, at_vertex, skip):
+    """Lanes whose BSDF sample took a null lobe (``thindielectric``'s transmission, as in
+    Mitsuba's volumetric integrators) go on as through a null surface: no vertex, no
+    bounce, the MIS state of the last vertex kept, the throughput weighted by the lobe.
+    Updates ``beta``, ``go_on``, ``rs``, ``at_vertex`` and ``skip`` in place (masked
+    assignments to the callers' loop state) and returns the mask of the lanes that crossed."""
+    crossed = lobe & bs.null & (bs.pdf > 0)
+    beta[crossed] = beta * bs.weight
+    go_on[crossed] = False
+    rs[crossed] = False
+    at_vertex[crossed] = False
+    skip[crossed] = True
+    return crossed
+
+
 def sample_direction(media, medium, ray, si, bs, sc, rng):
     """The path's next direction: (world direction, pdf, weight, delta) from the BSDF
     sample ``bs`` at surfaces, or a phase-function sample (weight 1) on medium lanes
