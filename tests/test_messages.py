@@ -70,3 +70,10 @@ def test_unknown_types_under_a_tag_are_left_to_the_loader():
     d = parse_string('<scene version="3.0.0"><sensor type="irradiancemeterr"/></scene>')   # no family knows it
     with pytest.raises(pbr.SceneError, match="unknown plugin type 'irradiancemeterr'"):
         pbr.load_dict(d)
+
+
+def test_non_finite_transform_names_the_problem():
+    xml = ('<scene version="3.0.0"><shape type="sphere" id="s"><transform name="to_world">'
+           '<rotate x="1" angle="nan"/></transform></shape></scene>')
+    with pytest.raises(pbr.SceneError, match=r"scene\.s\.to_world: the transform has non-finite entries \(\d+ of 16"):
+        pbr.load_dict(parse_string(xml))

@@ -227,8 +227,11 @@ class Props:
             e = np.eye(4)
             e[:2, :2], e[:2, 3], e[3, :2] = m[:2, :2], m[:2, 2], m[2, :2]
             m = e
-        if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-            raise self.error(name, f"expected a 4x4 finite matrix, got shape {m.shape}")
+        if m.shape != (4, 4):
+            raise self.error(name, f"expected a 4x4 matrix, got shape {m.shape}")
+        if not np.all(np.isfinite(m)):
+            raise self.error(name, f"the transform has non-finite entries ({int(np.sum(~np.isfinite(m)))} of 16: "
+                                   "a nan/inf angle, scale or translation?)")
         return m
 
     def child(self, name: str) -> "Props":
