@@ -189,7 +189,7 @@ def test_hash_grid_finds_exactly_the_points_within_radius():
     p_ph = (base + rng.normal(0, 0.2, (n_ph, 3))).astype(np.float32)
     p_ph[:500] = rng.uniform(-1, 1, (500, 3))
     grid = integ._build_grid(vp, mi.Float(r), n_pix)
-    phi = dr.zeros(mi.Float, 4 * n_pix)
+    phi = dr.zeros(mi.Float64, 4 * n_pix)   # float64, as _photon_flux makes it
     m = dr.zeros(mi.Float, n_pix)
     p = mi.Point3f(*[mi.Float(p_ph[:, i]) for i in range(3)])
     integ._deposit(grid, vp, mi.Float(r * r), phi, m, scene.bsdfs, p, mi.Vector3f(0, 1, 0), mi.Spectrum(1.0),
@@ -216,7 +216,7 @@ def test_update_rule_is_hachisuka_jensen():
     m = mi.Float([3.0, 5.0, 0.0])
     wl = integ._wavelengths(3, 0)
     flux = np.array([[1.0, 2.0, 3.0, 4.0], [0.5, 0.5, 0.5, 0.5], [9.0, 9.0, 9.0, 9.0]], np.float32)
-    phi = mi.Float(flux.ravel())
+    phi = mi.Float64(flux.ravel())
     vp = VisiblePoints(None, None, None, mi.Spectrum(2.0), None, None, None)
     xyz = spec.to_xyz(mi.Spectrum(2.0) * mi.Spectrum(*[mi.Float(flux[:, c]) for c in range(4)]), wl)
     xyz = np.stack([np.array(xyz[c]) for c in range(3)], axis=1)
