@@ -11,9 +11,10 @@ from .base import BSDF_TYPES, BSDFType, BSDFSample, TRANSMISSION, SPECULAR
 
 
 def pass_through(wi, pdf, active) -> BSDFSample:
-    """A forward-scattering delta sample of unit weight."""
+    """A forward-scattering delta sample of unit weight: a null lobe (Mitsuba's
+    ``BSDFFlags::Null``, which its ``path`` does not count as a surface seen)."""
     return BSDFSample(-wi, dr.select(active, pdf, 0.0), mi.Float(1.0), mi.Bool(True),
-                      dr.select(active, mi.Spectrum(1.0), 0.0))
+                      dr.select(active, mi.Spectrum(1.0), 0.0), null=active)
 
 
 @BSDF_TYPES.register("null")

@@ -37,7 +37,8 @@ class PathIntegrator(SamplingIntegrator):
                                     seen directly, 2 direct light)
     rr_depth       int     5        depth from which Russian roulette may end a path
     hide_emitters  bool    false    camera rays pass through emitting surfaces and do not see
-                                    the environment
+                                    the environment (not through null surfaces either, as
+                                    Mitsuba's path)
     light_sampler  string  bvh      light choice of next-event estimation: 'uniform', 'power'
                                     or 'bvh' (pbrt-v4's light BVH)
     =============  ======  =======  =============================================================
@@ -47,6 +48,11 @@ class PathIntegrator(SamplingIntegrator):
     default_max_depth = -1
     differentiable = True
     next_event = True   # light sampling at each vertex, MIS-weighted against BSDF sampling
+    # hide_emitters also hides the environment behind null lobes (null, mask cut-outs,
+    # thindielectric's transmission): Mitsuba's path counts a ray valid only once it has
+    # met a surface whose sampled lobe is not null; its prb and prb_basic hide the
+    # environment at depth 0 only.
+    hide_through_null = True
 
     def __init__(self, props):
         super().__init__(props)
@@ -73,6 +79,7 @@ class PathIntegrator(SamplingIntegrator):
         eta = mi.Float(1.0)
         terminated = mi.Bool(False)
         dispersive = bsdfs.dispersive
+        seen = mi.Bool(False)     # a surface whose sampled lobe is not null (hide_emitters)
 
         while dr.hint(active, label="path"):
             si, shape = geo.intersect(ray, active)
@@ -88,7 +95,7 @@ class PathIntegrator(SamplingIntegrator):
             # Rays leaving the scene see the infinite lights (MIS against NEE).
             escaped = active & ~si.is_valid()
             if self.hide_emitters:
-                escaped &= depth > 0
+                escaped &= seen if self.hide_through_null else depth > 0
             with dr.resume_grad(when=not primal):
                 # Without next-event estimation only BSDF sampling finds emitters: weight 1
                 # (what emitted_mis gives after a delta vertex).
@@ -130,6 +137,7 @@ class PathIntegrator(SamplingIntegrator):
                 f_sampled = bs.weight * bs.pdf
             replay_sample = bs.delta | bsdfs.stochastic(bsdf_id, active_next)
             bs = dr.detach(bs)
+            seen |= hit & ~skip & ~bs.null
             cont = active_next & (bs.pdf > 0)
 
             if primal:
@@ -199,6 +207,7 @@ class PRBBasicIntegrator(PathIntegrator):
     name = "prb_basic"
     default_max_depth = 6
     next_event = False
+    hide_through_null = False
     light_sampler_type = "uniform"   # no light is sampled
 
     def __init__(self, props):
@@ -218,3 +227,4 @@ class PRBIntegrator(PathIntegrator):
 
     name = "prb"
     default_max_depth = 6
+    hide_through_null = False
