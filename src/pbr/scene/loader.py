@@ -19,28 +19,22 @@ import os
 from .. import backend
 from ..bsdfs import BSDFSet, bsdf_names
 from ..cameras import SENSORS
-from ..films import FILMS
-from ..filters import FILTERS
 from ..geometry import CURVE_FILES, SHAPE_PARAMS, build_shape, shape_to_mitsuba
 from ..integrators import INTEGRATORS
 from ..lights import LIGHT_TYPES, LightSet
 from ..media import MEDIUM_TYPES, MediumSet
-from ..phase import PHASE_TYPES
 from ..plugins.props import FINITE, KNOWN_TYPES, Props, SceneError, did_you_mean
-from ..samplers import SAMPLERS
 from ..textures import TEXTURE_TYPES, TextureSet, load_spectrum
 from .objects import load_object
 from .params import mitsuba_key_paths
 from .scene import Scene, ShapeList
-from .xml import locate, parse_file_lines, parse_string
+from .xml import locate, parse_file_lines, parse_string, tag_types
 
 # Emitter types a shape can carry.
 SURFACE_EMITTERS = ("area", "directionalarea")
 
 # Every type name the loader accepts, for messages about misspelt nested plugins.
-KNOWN_TYPES.update(SENSORS, INTEGRATORS, SHAPE_PARAMS, TEXTURE_TYPES, bsdf_names(), LIGHT_TYPES, MEDIUM_TYPES,
-                   FILMS, FILTERS, PHASE_TYPES, SAMPLERS,
-                   {"shapegroup", "instance", "gridvolume", "constvolume", "ref"})
+KNOWN_TYPES.update(*tag_types().values(), {"ref"})
 
 
 class Loader:

@@ -27,6 +27,7 @@ parameters that no ``$name`` uses are errors.
 """
 from __future__ import annotations
 
+import functools
 import os
 import re
 from dataclasses import dataclass, field
@@ -320,7 +321,7 @@ class _Parser:
         """A type pbr knows only under other tags is an error here (``<sensor
         type="rectangle">``, ``<bsdf type="area">``): Mitsuba refuses such a mismatch.
         Types pbr does not know at all are left to the loader's message."""
-        families = _tag_types()
+        families = tag_types()
         if node.tag not in families or t in families[node.tag]:
             return
         owners = [tag for tag, types in families.items() if t in types and tag != "spectrum"]
@@ -636,13 +637,16 @@ def _parse(text, file: str, base_dir: str, kwargs: dict) -> dict:
 
 # ----------------------------------------------------------------------------- writing
 
-def _tag_types() -> dict:
-    """Object tag -> the type names pbr knows under it."""
-    return {"shape": set(SHAPE_PARAMS) | {"shapegroup", "instance"}, "bsdf": set(bsdf_names()),
-            "emitter": set(LIGHT_TYPES), "sensor": set(SENSORS), "film": set(FILMS), "sampler": set(SAMPLERS),
-            "rfilter": set(FILTERS), "integrator": set(INTEGRATORS), "texture": set(TEXTURE_TYPES),
-            "spectrum": set(TEXTURE_TYPES), "medium": set(MEDIUM_TYPES), "phase": set(PHASE_TYPES),
-            "volume": {"gridvolume", "constvolume"}}
+@functools.lru_cache(maxsize=None)
+def tag_types() -> dict:
+    """Object tag -> the type names pbr knows under it (every family registers its types
+    when pbr is imported, so this is built once)."""
+    return {"shape": frozenset(SHAPE_PARAMS) | {"shapegroup", "instance"}, "bsdf": frozenset(bsdf_names()),
+            "emitter": frozenset(LIGHT_TYPES), "sensor": frozenset(SENSORS), "film": frozenset(FILMS),
+            "sampler": frozenset(SAMPLERS), "rfilter": frozenset(FILTERS), "integrator": frozenset(INTEGRATORS),
+            "texture": frozenset(TEXTURE_TYPES), "spectrum": frozenset(TEXTURE_TYPES),
+            "medium": frozenset(MEDIUM_TYPES), "phase": frozenset(PHASE_TYPES),
+            "volume": frozenset({"gridvolume", "constvolume"})}
 
 
 def _xml_tags():
