@@ -393,12 +393,20 @@ def test_the_build_writes_the_start_up_hook(tmp_path):
 
 
 def _can_build_wheels() -> bool:
-    import setuptools
+    """Whether this environment can build wheels. Asked of the package metadata, not by
+    importing setuptools: in a process where something already imported the standard
+    library's distutils, importing setuptools fails (its distutils shim asserts)."""
+    from importlib import metadata
     try:
-        import wheel  # noqa: F401
+        metadata.version("wheel")
         return True
-    except ImportError:     # setuptools >= 70.1 builds wheels on its own
-        return tuple(int(x) for x in setuptools.__version__.split(".")[:2]) >= (70, 1)
+    except metadata.PackageNotFoundError:     # setuptools >= 70.1 builds wheels on its own
+        pass
+    try:
+        version = metadata.version("setuptools")
+    except metadata.PackageNotFoundError:
+        return False
+    return tuple(int(x) for x in version.split(".")[:2] if x.isdigit()) >= (70, 1)
 
 
 @pytest.mark.skipif(not _can_build_wheels(), reason="needs the 'wheel' package or setuptools >= 70.1 "
