@@ -294,8 +294,10 @@ class _State:
 class PBRTScene:
     """Reads a pbrt-v4 scene file into a Mitsuba-style dict (see the module docstring)."""
 
-    def __init__(self, path: str, approximate: bool = False, mesh_dir: str | None = None, overrides=None):
+    def __init__(self, path: str, approximate: bool = False, mesh_dir: str | None = None, overrides=None,
+                 skip_missing: bool = False):
         self.path = os.path.abspath(path)
+        self.skip_missing = skip_missing
         self.base = os.path.dirname(self.path)
         self.approximate = approximate
         self.mesh_dir = mesh_dir or os.path.join(tempfile.gettempdir(), "pbr-pbrt-meshes")
@@ -329,6 +331,14 @@ class PBRTScene:
             raise XMLError(f"{d.where}: {d.name}: {msg} (not supported; "
                            f"pbr.scene.pbrt.to_dict(..., approximate=True) substitutes and notes it)")
         self.note(d.where, f"{d.name}: {msg}")
+
+    def missing(self, where: str, directive: str, name: str, full: str) -> None:
+        """A file that does not exist: an error, or a note under ``skip_missing`` (the
+        caller then leaves the object out or substitutes a constant)."""
+        msg = f"file not found: {name!r} (looked for {full})"
+        if not self.skip_missing:
+            raise XMLError(f"{where}: {directive}: {msg}")
+        self.note(where, f"{directive}: {msg}; left out")
 
     def add(self, prefix: str, v: dict, where: str, key: str | None = None) -> str:
         if key is None:
@@ -504,7 +514,10 @@ class PBRTScene:
 
     def _d_Include(self, d):
         name, = self.args(d, 1)
-        self.run_file(resolve(name, self.base), d.where)
+        full = resolve(name, self.base)
+        if not os.path.exists(full):
+            return self.missing(d.where, d.name, name, full)
+        self.run_file(full, d.where)
 
     def _d_Import(self, d):
         # pbrt-v4 parses imported files in parallel; their named objects join the scene.
@@ -778,7 +791,7 @@ class PBRTScene:
                 raise p.error(None, "plymesh needs \"string filename\"")
             full = resolve(fname, self.base)
             if not os.path.exists(full):
-                raise p.error("filename", f"file not found: {fname!r} (looked in {self.base})")
+                return self.missing(p.d.where, p.d.name, fname, full)
             for k in ("displacement", "edgelength"):
                 if p.has(k):
                     p.p[k].used = True
@@ -913,6 +926,9 @@ class PBRTScene:
         if os.path.exists(full):
             pairs = _read_spd(full, q.where)
             return {"type": "spectrum", "value": [(float(a), float(b)) for a, b in pairs]}
+        if self.skip_missing and "." in os.path.basename(name):
+            self.missing(q.where, p.d.name, name, full)
+            return 1.0
         raise XMLError(f"{q.where}: {p.d.name}: parameter {q.name!r}: unknown named spectrum or missing file {name!r} "
                        f"(pbr knows {', '.join(sorted(SELLMEIER))}, metal-<X>-eta/k, stdillum-D65)")
 
@@ -959,7 +975,8 @@ class PBRTScene:
                 raise p.error(None, "imagemap needs \"string filename\"")
             full = resolve(fname, self.base)
             if not os.path.exists(full):
-                raise p.error("filename", f"file not found: {fname!r}")
+                self.missing(p.d.where, p.d.name, fname, full)
+                return 0.5
             wrap = p.string("wrap", "repeat")
             wraps = {"repeat": "repeat", "clamp": "clamp", "black": "clamp", "octahedralsphere": "repeat"}
             if wrap not in wraps:
@@ -1035,10 +1052,10 @@ class PBRTScene:
                 p.p[k].used = True
                 self.unsupported(p.d, "material 'displacement' (bump mapping)")
         nm = p.string("normalmap")
-        if nm:
-            full = resolve(nm, self.base)
-            if not os.path.exists(full):
-                raise p.error("normalmap", f"file not found: {nm!r}")
+        full = resolve(nm, self.base) if nm else None
+        if nm and not os.path.exists(full):
+            self.missing(p.p["normalmap"].where, p.d.name, nm, full)
+        elif nm:
             b = {"type": "normalmap", "normalmap": {"type": "bitmap", "filename": full, "raw": True,
                                                     "to_uv": _mi_transform(_affine3_to4(np.array(
                                                         [[1, 0, 0], [0, -1, 1], [0, 0, 1]])))}, "bsdf": b}
@@ -1125,7 +1142,8 @@ class PBRTScene:
                 raise p.error(None, "measured needs \"string filename\"")
             full = resolve(fname, self.base)
             if not os.path.exists(full):
-                raise p.error("filename", f"file not found: {fname!r}")
+                self.missing(p.d.where, p.d.name, fname, full)
+                return {"type": "twosided", "bsdf": {"type": "diffuse"}}
             return {"type": "measured", "filename": full}
         if t in ("coateddiffuse", "coatedconductor", "diffusetransmission"):
             b = {"type": t}
@@ -1288,7 +1306,8 @@ class PBRTScene:
         to Mitsuba's latitude-longitude ``envmap``."""
         import mitsuba as mi
         if not os.path.exists(fname):
-            raise p.error("filename", f"file not found: {fname!r}")
+            self.missing(p.d.where, p.d.name, os.path.basename(fname), fname)
+            return {"type": "constant", "radiance": sc}
         try:
             bmp = mi.Bitmap(fname).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
         except Exception as e:
@@ -1383,10 +1402,10 @@ class PBRTScene:
                     film.update(crop_offset_x=pb[0], crop_offset_y=pb[2], crop_width=pb[1] - pb[0],
                                 crop_height=pb[3] - pb[2])
                 iso, et = f.one("iso", "float", 100.0), f.one("exposuretime", "float", 1.0)
-                sensor = f.string("sensor", "cie1931")
-                if sensor != "cie1931" or iso != 100.0 or f.one("whitebalance", "float", 0.0) != 0:
-                    self.unsupported(self.film, f"film sensor {sensor!r} / iso / whitebalance (needs pbrt-v4's "
-                                                "'rgb' film plugin)")
+                sensor, wb = f.string("sensor", "cie1931"), f.one("whitebalance", "float", 0.0)
+                if sensor != "cie1931" or iso != 100.0 or wb != 0:
+                    self.unsupported(self.film, f"film sensor {sensor!r}, iso {iso}, whitebalance {wb} (pbr's "
+                                                "hdrfilm has pbrt-v4's defaults only: cie1931, 100, 0)")
                 if et != 1.0:
                     self.note(self.film.where, "Film: exposuretime is the shutter interval; no motion blur in pbr")
                 for k in ("filename", "maxcomponentvalue", "diagonal", "savefp16", "writefp16"):
@@ -1639,14 +1658,17 @@ def equal_area_to_latlong(img: np.ndarray, height: int | None = None) -> np.ndar
 
 
 @backend.uses_pbr_variant
-def convert(path: str, approximate: bool = False, mesh_dir: str | None = None, **overrides):
-    """(scene dict, notes, key path -> ``file:line``) of a pbrt-v4 file (see :func:`to_dict`)."""
+def convert(path: str, approximate: bool = False, mesh_dir: str | None = None, skip_missing: bool = False,
+            **overrides):
+    """(scene dict, notes, key path -> ``file:line``) of a pbrt-v4 file (see :func:`to_dict`).
+    ``notes``: ``file:line: ...`` messages on what was ignored or approximated;
+    ``skip_missing``: leave out objects whose files are missing, with a note."""
     backend.ensure()   # transforms are Mitsuba objects: a variant must be set
     unknown = set(overrides) - {"spp", "res", "width", "height", "maxdepth"}
     if unknown:
         raise XMLError(f"{path}:0: unknown override(s) {sorted(unknown)} (pbrt scenes take spp, res, width, "
                        "height, maxdepth)")
-    c = PBRTScene(path, approximate, mesh_dir, overrides)
+    c = PBRTScene(path, approximate, mesh_dir, overrides, skip_missing)
     d = c.read()
     return d, c.notes, c.lines
 
