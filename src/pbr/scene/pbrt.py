@@ -231,7 +231,9 @@ class _Params:
         return default if q is None else list(q.values)
 
     def array(self, name, ptype, width):
-        q = self._get(name, (ptype,) if ptype != "point3" else ("point3", "vector3"))
+        synonyms = {"point3": ("point3", "vector3", "normal"), "normal": ("normal", "vector3"),
+                    "point2": ("point2", "vector2", "float")}
+        q = self._get(name, synonyms.get(ptype, (ptype,)))
         if q is None:
             return None
         return np.asarray(q.values, dtype=np.float64).reshape(-1, width)
@@ -904,8 +906,11 @@ class PBRTScene:
             bb = {"type": "blackbody", "temperature": t}
             if kind == "illuminant":
                 return bb
-            # pbrt-v4's BlackbodySpectrum is normalised to a peak of 1.
-            return {"type": "scale", "tex": bb, "scale": 1.0 / _blackbody_peak(t)}
+            # pbrt-v4's BlackbodySpectrum is normalised to a peak of 1 (tabulated here, so
+            # that it can be an albedo).
+            lam = np.arange(LAMBDA_MIN, LAMBDA_MAX + 1.0, 5.0)
+            vals = blackbody(lam, t) / _blackbody_peak(t)
+            return {"type": "spectrum", "value": [(float(a), float(b)) for a, b in zip(lam, vals)]}
         if q.type == "spectrum":
             v = q.values[0]
             if isinstance(v, str):
@@ -1226,19 +1231,25 @@ class PBRTScene:
         raise p.error("type", f"unknown medium {t!r} (pbrt-v4's: homogeneous, uniformgrid, rgbgrid, cloud, nanovdb)")
 
     # -- lights ----------------------------------------------------------------------------------------------------
-    def _light_scale(self, p, lum):
-        """pbrt-v4's scale, divided by the spectrum's luminance unless ``power`` (which pbr's
-        lights normalise themselves) is given."""
+    def _light_scale(self, p, name, value, lum):
+        """``{name: value, ...}`` with pbrt-v4's scale, divided by the spectrum's luminance
+        unless ``power`` (which pbr's lights normalise themselves) is given. A factor on an
+        RGB value is folded into it (so that Mitsuba reads the dict too)."""
         sc = p.one("scale", "float", 1.0)
         power = p.one("power", "float", -1.0)
-        out = {}
+        out = {name: value}
         if power > 0:
             out["power"] = power
-            out["scale"] = sc
         else:
             if lum <= 0:
                 raise p.error(None, "the light's spectrum is black (zero luminance)")
-            out["scale"] = sc / lum
+            sc = sc / lum
+        if isinstance(value, dict) and value.get("type") == "rgb":
+            out[name] = {"type": "rgb", "value": [v * sc for v in value["value"]]}
+        elif isinstance(value, float):
+            out[name] = value * sc
+        elif sc != 1.0:
+            out["scale"] = sc
         return out
 
     def light(self, p: _Params, t: str) -> dict | None:
@@ -1246,8 +1257,8 @@ class PBRTScene:
         if t == "point":
             i, lum = self.emission(p, "I")
             frm = p.vec3("from", (0, 0, 0))
-            return {"type": "point", "intensity": i, "to_world": _mi_transform(m @ _translate(*frm)),
-                    **self._light_scale(p, lum)}
+            return {"type": "point", "to_world": _mi_transform(m @ _translate(*frm)),
+                    **self._light_scale(p, "intensity", i, lum)}
         if t == "spot":
             i, lum = self.emission(p, "I")
             frm, to = p.vec3("from", (0, 0, 0)), p.vec3("to", (0, 0, 1))
@@ -1255,26 +1266,29 @@ class PBRTScene:
             self.note(p.d.where, "LightSource: spot falls off linearly in angle between the cone angles "
                                  "(Mitsuba's), pbrt-v4 uses a smoothstep in cos")
             frame = np.linalg.inv(_look_at(frm, to, _any_up(to - frm)))
-            return {"type": "spot", "intensity": i, "cutoff_angle": cone, "beam_width": max(cone - delta, 0.0),
-                    "to_world": _mi_transform(m @ frame), **self._light_scale(p, lum)}
+            return {"type": "spot", "cutoff_angle": cone, "beam_width": max(cone - delta, 0.0),
+                    "to_world": _mi_transform(m @ frame), **self._light_scale(p, "intensity", i, lum)}
         if t == "distant":
             l, lum = self.emission(p, "L")
-            out = {"type": "distant", "L": l, "from": list(p.vec3("from", (0, 0, 0))),
-                   "to": list(p.vec3("to", (0, 0, 1))), "to_world": _mi_transform(m)}
-            sc = p.one("scale", "float", 1.0)
+            w = m[:3, :3] @ (p.vec3("to", (0, 0, 1)) - p.vec3("from", (0, 0, 0)))
+            if not np.linalg.norm(w) > 0:
+                raise p.error("to", "'from' and 'to' coincide: the light has no direction")
+            direction = [float(x) for x in w / np.linalg.norm(w)]
             ill = p.one("illuminance", "float", -1.0)
             if ill > 0:
-                out.update(scale=sc, illuminance=ill)
-            else:
-                out["scale"] = sc / lum
-            return out
+                return {"type": "distant", "L": l, "direction": direction, "scale": p.one("scale", "float", 1.0),
+                        "illuminance": ill}
+            # pbrt's L times scale is the irradiance on a plane facing the light: Mitsuba's
+            # directional light.
+            out = self._light_scale(p, "irradiance", l, lum)
+            return {"type": "directional", "direction": direction, **out}
         if t == "goniometric":
             i, lum = self.emission(p, "I")
             fname = p.string("filename")
             if fname is None:
                 raise p.error(None, "goniometric needs \"string filename\"")
-            return {"type": "goniometric", "I": i, "filename": resolve(fname, self.base),
-                    "to_world": _mi_transform(m), **self._light_scale(p, lum)}
+            return {"type": "goniometric", "filename": resolve(fname, self.base),
+                    "to_world": _mi_transform(m), **self._light_scale(p, "I", i, lum)}
         if t == "projection":
             fname = p.string("filename")
             if fname is None:

@@ -31,6 +31,12 @@ _TOKEN_RE = re.compile(r'''
     (?P<ws>[ \t\r]+) | (?P<nl>\n) | (?P<comment>\#[^\n]*) |
     (?P<str>"(?:[^"\\\n]|\\.)*") | (?P<open>\[) | (?P<close>\]) |
     (?P<word>[^\s"\[\]\#]+) | (?P<bad>")''', re.VERBOSE)
+# How many quoted strings each directive takes before its parameters (pbrt-v4's syntax).
+_STRING_ARGS = {k: 1 for k in (
+    "Shape", "Material", "LightSource", "AreaLightSource", "Camera", "Film", "Sampler", "PixelFilter",
+    "Integrator", "Accelerator", "MakeNamedMaterial", "MakeNamedMedium", "NamedMaterial", "ObjectBegin",
+    "ObjectInstance", "Include", "Import", "CoordinateSystem", "CoordSysTransform", "ColorSpace", "Attribute")}
+_STRING_ARGS.update(Texture=3, MediumInterface=2, Option=0)
 _ESCAPES = {"b": "\b", "f": "\f", "n": "\n", "r": "\r", "t": "\t", "\\": "\\", "'": "'", '"': '"'}
 
 
@@ -165,12 +171,19 @@ def read_directives(path: str, text: str | None = None):
             raise XMLError(f"{t.where}: expected a directive, got {shown}")
         d = Directive(t.text, [], [], t.where)
         i += 1
-        # Positional arguments: unquoted numbers, or quoted strings that are not "type name".
+        if d.name == "ActiveTransform" and i < n and not toks[i].quoted:
+            d.args.append(toks[i].text)      # its argument is an unquoted word
+            i += 1
+            yield d
+            continue
+        # Positional arguments: numbers (possibly in brackets), or the directive's quoted
+        # strings (as many as it takes, so that a misspelt "type name" is a parameter).
+        nstr = _STRING_ARGS.get(d.name)
         bracket = False
         while i < n:
             a = toks[i]
             if a.text == "[" and not a.quoted:
-                if d.args or bracket:
+                if d.args or bracket or nstr is not None:
                     break
                 bracket = True
                 i += 1
@@ -182,11 +195,14 @@ def read_directives(path: str, text: str | None = None):
                 i += 1
                 break
             if a.quoted:
-                if len(a.text.split()) == 2 and not bracket and a.text.split()[0] in PARAM_TYPES:
+                if nstr is None or len(d.args) >= nstr:
+                    break
+                if d.name == "MediumInterface" and d.args and len(a.text.split()) == 2 \
+                        and a.text.split()[0] in PARAM_TYPES:
                     break
                 d.args.append(a.text)
             else:
-                if not re.match(r"[+-]?(\d|\.\d)", a.text):
+                if nstr is not None or not re.match(r"[+-]?(\d|\.\d)", a.text):
                     break       # the next directive
                 d.args.append(_number(a, d.name))
             i += 1
