@@ -93,14 +93,14 @@ LightSource "point" "rgb I" [1 2 3] "point3 from" [0 1 0]
     # looking down -z, so camera-space z = 1 is world (0, 0, 4).
     first = s["shape_0001"]
     assert first["radius"] == 0.5
-    np.testing.assert_allclose(np.array(first["to_world"].matrix)[:3, 3], [0, 0, 4], atol=1e-6)
-    # Transform then ConcatTransform, Rotate, Scale: translation (1, 2, 0) from the two matrices.
-    m = np.array(s["shape_0002"]["to_world"].matrix)
-    np.testing.assert_allclose(m[:3, 3], [1, 2, 0], atol=1e-6)
-    np.testing.assert_allclose(m[:3, :3], [[0, -2, 0], [2, 0, 0], [0, 0, 2]], atol=1e-6)
+    np.testing.assert_allclose(first["center"], [0, 0, 4], atol=1e-6)
+    # Transform then ConcatTransform, Rotate, Scale: translation (1, 2, 0) from the two
+    # matrices, radius 0.5 scaled by 2.
+    np.testing.assert_allclose(s["shape_0002"]["center"], [1, 2, 0], atol=1e-6)
+    assert s["shape_0002"]["radius"] == pytest.approx(1.0)
     # Include and Import: the included sphere with the imported named material.
     assert s["shape_0003"]["radius"] == 0.25 and s["shape_0003"]["bsdf"]["id"] == "mat_imported"
-    np.testing.assert_allclose(np.array(s["shape_0003"]["to_world"].matrix), np.eye(4), atol=1e-12)
+    np.testing.assert_allclose(s["shape_0003"]["center"], [0, 0, 0], atol=1e-12)
     # The textured coated diffuse material; the disk inside the fog, ReverseOrientation.
     disk = s["shape_0004"]
     assert disk["type"] == "disk" and disk["flip_normals"] is True
@@ -136,7 +136,7 @@ Shape "sphere"
         to_dict(path)
     d, notes, _ = convert(path, approximate=True)
     assert any("animated transforms" in n for n in notes)
-    np.testing.assert_allclose(np.array(d["shape_0001"]["to_world"].matrix), np.eye(4))
+    np.testing.assert_allclose(d["shape_0001"]["center"], [0, 0, 0])
 
 
 def test_parameter_types(tmp_path):

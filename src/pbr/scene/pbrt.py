@@ -746,10 +746,15 @@ class PBRTScene:
         if t == "sphere":
             r = p.one("radius", "float", 1.0)
             zmin, zmax, phimax = p.one("zmin", "float", -r), p.one("zmax", "float", r), p.one("phimax", "float", 360.0)
-            if zmin <= -r and zmax >= r and phimax >= 360:
-                s = {"type": "sphere", "radius": r, "to_world": _mi_transform(m), "flip_normals": rev}
-                s["_area"] = 4 * math.pi * r * r * _area_scale(m)
+            if zmin <= -r and zmax >= r and phimax >= 360 and _is_similarity(m):
+                # World-space centre and radius: Mitsuba's sphere takes no reflections or
+                # non-uniform scales in to_world (ellipsoids become meshes below).
+                k = abs(np.linalg.det(m[:3, :3])) ** (1.0 / 3.0)
+                s = {"type": "sphere", "center": [float(x) for x in m[:3, 3]], "radius": r * k, "flip_normals": rev}
+                s["_area"] = 4 * math.pi * (r * k) ** 2
                 return s
+            if zmin <= -r and zmax >= r and phimax >= 360:
+                return self.mesh(p, *_sphere_mesh(r, -r, r, 360.0))
             return self.mesh(p, *_sphere_mesh(r, max(zmin, -r), min(zmax, r), phimax))
         if t == "disk":
             h, r = p.one("height", "float", 0.0), p.one("radius", "float", 1.0)
