@@ -98,6 +98,10 @@ def _mi_transform(m):
 
 # -- spectra -----------------------------------------------------------------------------
 
+# pbrt-v4's named glasses that pbr has no dispersion data for: their IOR near 587.6 nm
+# (from pbrt-v4's tables), used under ``approximate``.
+_GLASS_ND = {"glass-fk51a": 1.4869, "glass-lasf9": 1.8509, "glass-f5": 1.6732, "glass-f10": 1.7277}
+
 # pbrt-v4's named metal spectra and the Mitsuba IOR data of the same metal.
 _METALS = {"Ag": "Ag", "Al": "Al", "Au": "Au", "Cu": "Cu", "CuZn": "CuZn", "MgO": "MgO", "TiO2": "TiO2"}
 
@@ -928,6 +932,12 @@ class PBRTScene:
         lname = name.lower()
         if lname in SELLMEIER:
             return name          # pbr's dielectrics take Sellmeier glass names
+        if lname == "glass-f11":
+            return "glass-SF11"  # pbrt-v4's "glass-F11" is Schott SF11
+        if lname in _GLASS_ND:
+            self.unsupported(p.d, f"dispersive glass {name!r} (pbr has Sellmeier data for "
+                                  f"{', '.join(sorted(SELLMEIER))}): its IOR at 587.6 nm, {_GLASS_ND[lname]}, is used")
+            return _GLASS_ND[lname]
         if lname.startswith("metal-"):
             return name          # conductors take "metal-Cu-eta" (handled by the material)
         if lname == "stdillum-d65":
@@ -986,6 +996,8 @@ class PBRTScene:
             full = resolve(fname, self.base)
             if not os.path.exists(full):
                 self.missing(p.d.where, p.d.name, fname, full)
+                for q in p.d.params:
+                    q.used = True
                 return 0.5
             wrap = p.string("wrap", "repeat")
             wraps = {"repeat": "repeat", "clamp": "clamp", "black": "clamp", "octahedralsphere": "repeat"}
