@@ -449,3 +449,37 @@ def test_cli_renders_pbrt(tmp_path):
     out = tmp_path / "out.exr"
     assert main(["render", path, "-o", str(out), "--res", "16", "--backend", "llvm"]) == 0
     assert out.exists()
+
+
+def test_curves_subdivision_instances_media_render(tmp_path):
+    """Curves (Bezier -> Mitsuba's B-spline: the curve still starts at P0), Loop
+    subdivision, object instances and a medium behind an interface load and render."""
+    path = write(tmp_path, HEAD + """WorldBegin
+LightSource "infinite" "rgb L" [0.5 0.5 0.5]
+Material "hair"
+Shape "curve" "point3 P" [0 0 0  0.3 0.3 0  0.6 -0.3 0  1 0 0] "float width0" 0.1 "float width1" 0.05 "string type" "cylinder"
+Material "diffuse"
+Shape "loopsubdiv" "integer levels" 2 "point3 P" [0 0 1  1 0 -1  -1 0 -1  0 1 0] "integer indices" [0 1 2  0 3 1  1 3 2  2 3 0]
+ObjectBegin "ball"
+  Shape "sphere" "float radius" 0.2
+ObjectEnd
+Translate -1 -1 0
+ObjectInstance "ball"
+Translate 2 0 0
+ObjectInstance "ball"
+MakeNamedMedium "smoke" "string type" "homogeneous" "rgb sigma_a" [0.5 0.5 0.5] "rgb sigma_s" [1 1 1] "float g" 0.3
+MediumInterface "smoke" ""
+Material "interface"
+Shape "sphere" "float radius" 0.5
+""")
+    d, notes, _ = convert(path)
+    curve = next(v for v in d.values() if isinstance(v, dict) and v.get("type") == "bsplinecurve")
+    first = [float(x) for x in open(curve["filename"]).read().splitlines()[:4][0].split()]
+    q = np.array([[float(x) for x in line.split()] for line in open(curve["filename"]).read().splitlines()[:4]])
+    start = (q[0, :3] + 4 * q[1, :3] + q[2, :3]) / 6           # a uniform cubic B-spline at t = 0
+    np.testing.assert_allclose(start, [0, 0, 0], atol=1e-6)
+    assert first[3] == pytest.approx(0.05)                       # radius = width0 / 2
+    assert any("loopsubdiv" in n for n in notes)
+    assert sum(1 for k in d if k.startswith("instance_")) == 2
+    img = np.asarray(pbr.render(pbr.load_dict(d), spp=4))
+    assert np.isfinite(img).all() and img.mean() > 0
