@@ -483,3 +483,48 @@ Shape "sphere" "float radius" 0.5
     assert sum(1 for k in d if k.startswith("instance_")) == 2
     img = np.asarray(pbr.render(pbr.load_dict(d), spp=4))
     assert np.isfinite(img).all() and img.mean() > 0
+
+
+@pytest.mark.parametrize("region, normal", [
+    ("diamond", (0, 0, 1)),      # the octahedral map's inner diamond is the upper hemisphere (+z)
+    ("right", (1, 0, 0)),        # u > 0: x > 0
+    ("bottom", (0, 1, 0)),       # image rows below the middle: v > 0, y > 0
+])
+def test_infinite_light_equal_area_image(tmp_path, region, normal):
+    """pbrt-v4's image infinite light: an equal-area square image in light space. An image
+    that is 1 over one hemisphere and 0 elsewhere gives a diffuse plane (albedo 0.5) facing
+    that hemisphere's pole the radiance 0.5 (irradiance pi), and the opposite plane 0."""
+    import mitsuba as mi
+    n = 64
+    c = (np.arange(n) + 0.5) / n * 2 - 1
+    u, v = np.meshgrid(c, c)          # u along columns, v along rows
+    mask = {"diamond": np.abs(u) + np.abs(v) < 1, "right": u > 0, "bottom": v > 0}[region]
+    img = np.repeat(mask[..., None].astype(np.float32), 3, axis=2)
+    mi.Bitmap(img).write(str(tmp_path / "env.exr"))
+    results = []
+    for sign in (1, -1):
+        nx, ny, nz = (sign * x for x in normal)
+        up = "0 1 0" if ny == 0 else "1 0 0"
+        path = write(tmp_path, f"""
+LookAt {3 * nx} {3 * ny} {3 * nz}  0 0 0  {up}
+Camera "perspective" "float fov" 5
+Film "rgb" "integer xresolution" 4 "integer yresolution" 4
+Sampler "independent" "integer pixelsamples" 64
+Integrator "path" "integer maxdepth" 1
+WorldBegin
+LightSource "infinite" "string filename" "env.exr"
+Material "diffuse" "rgb reflectance" [0.5 0.5 0.5]
+Shape "disk" "float radius" 10
+""".replace('Shape "disk"', _orient(nx, ny, nz) + '\nShape "disk"'), f"s{sign}.pbrt")
+        results.append(luminance(render_mean(path)).mean())
+    assert results[0] == pytest.approx(0.5, rel=0.05)
+    assert results[1] < 0.01
+
+
+def _orient(nx, ny, nz):
+    """pbrt directives turning the disk's +z normal to (nx, ny, nz)."""
+    if nz:
+        return "" if nz > 0 else "Rotate 180 1 0 0"
+    if nx:
+        return f"Rotate {90 * nx} 0 1 0"
+    return f"Rotate {-90 * ny} 1 0 0"
