@@ -528,3 +528,39 @@ def _orient(nx, ny, nz):
     if nx:
         return f"Rotate {90 * nx} 0 1 0"
     return f"Rotate {-90 * ny} 1 0 0"
+
+
+def test_imagemap_conventions(tmp_path):
+    """pbrt-v4 looks image maps up at (s, 1 - t) with s = uscale u + udelta: a 2x2 image
+    whose bottom-left texel is white, on a quad with uv (0, 0) at its lower left, shows
+    white in the lower left; 'invert' gives 1 - value."""
+    import mitsuba as mi
+    img = np.zeros((2, 2, 3), dtype=np.float32)
+    img[1, 0] = 1.0                   # row 1 is the bottom row of the image
+    mi.Bitmap(img).write(str(tmp_path / "tex.exr"))
+    # pbrt's LookAt from +z shows world +x on the image's left (its camera space is
+    # left-handed); "Scale -1 1 1" first, as exported scenes do, puts it on the right.
+    scene = """
+Scale -1 1 1
+LookAt 0 0 1  0 0 0  0 1 0
+Camera "orthographic"
+Film "rgb" "integer xresolution" 8 "integer yresolution" 8
+Sampler "independent" "integer pixelsamples" 4
+Integrator "path" "integer maxdepth" 1
+WorldBegin
+Texture "t" "spectrum" "imagemap" "string filename" "tex.exr" "string filter" "point" {extra}
+AreaLightSource "diffuse" "rgb L" [1 1 1]
+Material "diffuse" "texture reflectance" "t"
+Shape "trianglemesh" "point3 P" [-1 -1 0 1 -1 0 1 1 0 -1 1 0] "integer indices" [0 1 2 0 2 3] "point2 uv" [0 0 1 0 1 1 0 1]
+"""
+    # The quad emits L = 1 and reflects nothing: the texture is read through a lit floor instead.
+    scene = scene.replace('AreaLightSource "diffuse" "rgb L" [1 1 1]\n', "").replace(
+        "WorldBegin\n", 'WorldBegin\nLightSource "distant" "point3 from" [0 0 1] "point3 to" [0 0 0] "rgb L" [3.14159265 3.14159265 3.14159265]\n')
+    out = []
+    for extra in ("", '"bool invert" true'):
+        path = write(tmp_path, scene.format(extra=extra), f"img{len(out)}.pbrt")
+        out.append(luminance(render_mean(path)))
+    a, b = out
+    # Orthographic view of [-1, 1]^2: the lower-left quarter (image rows 4..7, columns 0..3).
+    assert a[4:, :4].mean() == pytest.approx(1.0, rel=0.02) and a[:4].max() < 1e-3 and a[4:, 4:].max() < 1e-3
+    assert b[4:, :4].max() < 1e-3 and b[:4, 4:].mean() == pytest.approx(1.0, rel=0.02)

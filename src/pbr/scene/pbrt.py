@@ -1009,17 +1009,19 @@ class PBRTScene:
             if filt not in ("bilinear", "point"):
                 self.note(p.d.where, f"Texture: imagemap filter {filt!r} is bilinear in pbr (no MIP-mapping yet)")
             enc = p.string("encoding", "sRGB")
-            raw = enc == "linear" or (kind == "float" and enc != "sRGB" and False)
+            if enc not in ("sRGB", "linear"):
+                self.unsupported(p.d, f"imagemap encoding {enc!r} (sRGB or linear)")
+            raw = enc == "linear"
             t = {"type": "bitmap", "filename": full, "wrap_mode": wraps[wrap],
                  "filter_type": "nearest" if filt == "point" else "bilinear",
                  "to_uv": _mi_transform(_affine3_to4(self._uv_transform(p, flip_v=True)))}
             if raw:
                 t["raw"] = True
             sc, inv = p.one("scale", "float", 1.0), p.bool("invert", False)
-            if inv:
-                self.unsupported(p.d, "imagemap 'invert'")
             if sc != 1.0:
                 t = {"type": "scale", "tex": t, "scale": sc}
+            if inv:      # pbrt-v4: 1 - scale * texel, i.e. mix(1, 0) with the texel as amount
+                t = {"type": "mix", "tex1": 1.0, "tex2": 0.0, "amount": t}
             return t
         if cls == "checkerboard" and p.one("dimension", "integer", 2) == 2:
             # pbrt's squares have size 1 in (s, t); Mitsuba's checkerboard has period 1.
