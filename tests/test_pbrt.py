@@ -547,6 +547,7 @@ Camera "orthographic"
 Film "rgb" "integer xresolution" 8 "integer yresolution" 8
 Sampler "independent" "integer pixelsamples" 4
 Integrator "path" "integer maxdepth" 1
+PixelFilter "box"
 WorldBegin
 Texture "t" "spectrum" "imagemap" "string filename" "tex.exr" "string filter" "point" {extra}
 AreaLightSource "diffuse" "rgb L" [1 1 1]
