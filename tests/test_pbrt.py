@@ -565,3 +565,26 @@ Shape "trianglemesh" "point3 P" [-1 -1 0 1 -1 0 1 1 0 -1 1 0] "integer indices" 
     # Orthographic view of [-1, 1]^2: the lower-left quarter (image rows 4..7, columns 0..3).
     assert a[4:, :4].mean() == pytest.approx(1.0, rel=0.02) and a[:4].max() < 1e-3 and a[4:, 4:].max() < 1e-3
     assert b[4:, :4].max() < 1e-3 and b[:4, 4:].mean() == pytest.approx(1.0, rel=0.02)
+
+
+def test_checkerboard_conventions(tmp_path):
+    """pbrt-v4's 2D checkerboard: tex1 where floor(s) + floor(t) is even, squares of size
+    1 in (s, t) = (uscale u, vscale v): with scale 2 on a quad with uv (0, 0) at its lower
+    left, tex1 fills the lower-left and upper-right quarters."""
+    path = write(tmp_path, """
+Scale -1 1 1
+LookAt 0 0 1  0 0 0  0 1 0
+Camera "orthographic"
+Film "rgb" "integer xresolution" 8 "integer yresolution" 8
+Sampler "independent" "integer pixelsamples" 4
+Integrator "path" "integer maxdepth" 1
+PixelFilter "box"
+WorldBegin
+LightSource "distant" "point3 from" [0 0 1] "point3 to" [0 0 0] "rgb L" [3.14159265 3.14159265 3.14159265]
+Texture "c" "spectrum" "checkerboard" "float uscale" 2 "float vscale" 2 "rgb tex1" [1 1 1] "rgb tex2" [0.2 0.2 0.2]
+Material "diffuse" "texture reflectance" "c"
+Shape "trianglemesh" "point3 P" [-1 -1 0 1 -1 0 1 1 0 -1 1 0] "integer indices" [0 1 2 0 2 3] "point2 uv" [0 0 1 0 1 1 0 1]
+""")
+    y = luminance(render_mean(path))
+    q = [y[4:, :4].mean(), y[:4, 4:].mean(), y[:4, :4].mean(), y[4:, 4:].mean()]
+    np.testing.assert_allclose(q, [1.0, 1.0, 0.2, 0.2], rtol=0.03)
