@@ -332,11 +332,15 @@ class PBRTScene:
         self.notes.append(f"{where}: {msg}")
 
     def unsupported(self, d: Directive, msg: str) -> None:
-        """A feature pbr lacks: an error, or a note under ``approximate``."""
+        """A feature pbr lacks: an error, or a note under ``approximate``. ``msg`` is
+        'feature' or 'feature: substitute is used'."""
+        feature, subst = msg, "ignored"
+        if msg.endswith(" is used") and ": " in msg:
+            feature, subst = msg.rsplit(": ", 1)
         if not self.approximate:
-            raise XMLError(f"{d.where}: {d.name}: {msg} (not supported; "
-                           f"pbr.scene.pbrt.to_dict(..., approximate=True) substitutes and notes it)")
-        self.note(d.where, f"{d.name}: {msg}")
+            raise XMLError(f"{d.where}: {d.name}: {feature} is not supported by pbr "
+                           f"(with approximate=True: {subst}, noted)")
+        self.note(d.where, f"{d.name}: {feature} is not supported: {subst}")
 
     def missing(self, where: str, directive: str, name: str, full: str) -> None:
         """A file that does not exist: an error, or a note under ``skip_missing`` (the
@@ -851,7 +855,7 @@ class PBRTScene:
         degree = p.one("degree", "integer", 3)
         ctype = p.string("type", "flat")
         if ctype != "cylinder":
-            self.unsupported(p.d, f"curve type {ctype!r} (rendered as a round tube, Mitsuba's bsplinecurve)")
+            self.unsupported(p.d, f"curve type {ctype!r}: a round tube (Mitsuba's bsplinecurve) is used")
         if degree != 3:
             self.unsupported(p.d, f"curve degree {degree} (only cubic curves)")
         w = p.one("width", "float", 1.0)
@@ -1004,7 +1008,7 @@ class PBRTScene:
             if wrap not in wraps:
                 raise p.error("wrap", f"expected repeat, black, clamp or octahedralsphere, got {wrap!r}")
             if wrap in ("black", "octahedralsphere"):
-                self.unsupported(p.d, f"imagemap wrap {wrap!r} (uses 'clamp'/'repeat')")
+                self.unsupported(p.d, f"imagemap wrap {wrap!r}: {wraps[wrap]!r} is used")
             filt = p.string("filter", "bilinear")
             if filt not in ("bilinear", "point"):
                 self.note(p.d.where, f"Texture: imagemap filter {filt!r} is bilinear in pbr (no MIP-mapping yet)")
@@ -1031,7 +1035,7 @@ class PBRTScene:
         if cls in TEXTURE_TYPES or cls in ("fbm", "wrinkled", "windy", "marble", "dots", "checkerboard",
                                            "imagemap", "bilerp", "directionmix", "ptex"):
             if cls not in TEXTURE_TYPES:
-                self.unsupported(p.d, f"texture {cls!r} (pbr has no such texture yet)")
+                self.unsupported(p.d, f"texture {cls!r} (pbr has no such texture yet): a constant 0.5 is used")
                 return 0.5
             return self.passthrough(p, cls)
         raise p.error(None, f"unknown texture {cls!r}")
@@ -1065,7 +1069,7 @@ class PBRTScene:
                 out.append(math.sqrt(max(v, 0.0)) if remap else v)
             else:
                 if remap:
-                    self.unsupported(p.d, "a roughness texture with remaproughness (used unremapped)")
+                    self.unsupported(p.d, "a roughness texture with remaproughness: the texture, not remapped, is used")
                 out.append(v)
         return out
 
@@ -1383,12 +1387,12 @@ class PBRTScene:
     def finish(self) -> None:
         for v in list(self.out.values()):
             _strip_private(v)
+        sensor, integrator = self.sensor(), self.make_integrator()
         if not any(isinstance(v, dict) and v.get("type") in ("ply", "sphere", "disk", "cylinder", "bsplinecurve",
                                                             "instance") for v in self.out.values()):
             raise XMLError(f"{self.path}:0: the scene has no shapes")
-        self.out["sensor"] = self.sensor()
+        self.out["sensor"], self.out["integrator"] = sensor, integrator
         self.lines["scene.sensor"] = self.camera.where if self.camera else f"{self.path}:1"
-        self.out["integrator"] = self.make_integrator()
         self.lines["scene.integrator"] = self.integrator.where if self.integrator else f"{self.path}:1"
         # Keep the sensor and the integrator first, as Mitsuba scenes usually list them.
         self.out = {"type": "scene", "integrator": self.out.pop("integrator"), "sensor": self.out.pop("sensor"),
@@ -1420,7 +1424,7 @@ class PBRTScene:
         else:
             film = {"type": "hdrfilm", "width": w, "height": h, "pixel_format": "rgb"}
             if t != "rgb" and self.film is not None:
-                self.unsupported(self.film, f"film {t!r} (an RGB hdrfilm is used)")
+                self.unsupported(self.film, f"film {t!r}: an RGB hdrfilm is used")
             if f is not None:
                 cw = f.floats("cropwindow")
                 if cw is not None:
@@ -1436,11 +1440,13 @@ class PBRTScene:
                                 crop_height=pb[3] - pb[2])
                 iso, et = f.one("iso", "float", 100.0), f.one("exposuretime", "float", 1.0)
                 sensor, wb = f.string("sensor", "cie1931"), f.one("whitebalance", "float", 0.0)
-                if sensor != "cie1931" or iso != 100.0 or wb != 0:
-                    self.unsupported(self.film, f"film sensor {sensor!r}, iso {iso}, whitebalance {wb} (pbr's "
-                                                "hdrfilm has pbrt-v4's defaults only: cie1931, 100, 0)")
-                if et != 1.0:
-                    self.note(self.film.where, "Film: exposuretime is the shutter interval; no motion blur in pbr")
+                if sensor != "cie1931" or wb != 0:
+                    self.unsupported(self.film, f"film sensor {sensor!r} with whitebalance {wb} (pbr's hdrfilm "
+                                                "is pbrt-v4's cie1931 sensor without white balancing)")
+                if iso * et != 100.0:
+                    # pbrt-v4's imaging ratio for the cie1931 sensor: a factor on the image.
+                    self.note(self.film.where, f"Film: iso {iso} and exposuretime {et}: pbrt-v4's image is "
+                                               f"pbr's times {iso * et / 100:g}")
                 for k in ("filename", "maxcomponentvalue", "diagonal", "savefp16", "writefp16"):
                     if f.has(k):
                         f.p[k].used = True
@@ -1472,7 +1478,7 @@ class PBRTScene:
             r = f.one("xradius", "float", 2.0) if f else 2.0
             return {"type": "tent", "radius": r}
         if t in ("mitchell", "lanczos", "sinc"):
-            self.unsupported(self.filter, f"pixel filter {t!r} (a gaussian is used)")
+            self.unsupported(self.filter, f"pixel filter {t!r}: a Gaussian is used")
             return {"type": "gaussian", "stddev": 0.5}
         raise XMLError(f"{self.filter.where}: PixelFilter: unknown filter {t!r}")
 
