@@ -588,3 +588,26 @@ Shape "trianglemesh" "point3 P" [-1 -1 0 1 -1 0 1 1 0 -1 1 0] "integer indices" 
     y = luminance(render_mean(path))
     q = [y[4:, :4].mean(), y[:4, 4:].mean(), y[:4, :4].mean(), y[4:, 4:].mean()]
     np.testing.assert_allclose(q, [1.0, 1.0, 0.2, 0.2], rtol=0.03)
+
+
+def test_spot_light_axis_and_intensity(tmp_path):
+    """A spot light from (0, 0, 2) to the origin: on its axis the intensity is I scale
+    (RGB of unit luminance), so the diffuse plane (albedo 0.5) at distance 2 shows
+    0.5 / pi * I / 4; outside the cone (a point 2 units aside: 45 degrees) it is dark."""
+    path = write(tmp_path, """
+Scale -1 1 1
+LookAt 0 0 6  0 0 0  0 1 0
+Camera "orthographic"
+Film "rgb" "integer xresolution" 9 "integer yresolution" 9
+Sampler "independent" "integer pixelsamples" 16
+Integrator "path" "integer maxdepth" 1
+PixelFilter "box"
+WorldBegin
+LightSource "spot" "rgb I" [1 1 1] "float scale" 8 "point3 from" [0 0 2] "point3 to" [0 0 0] "float coneangle" 20
+Material "diffuse" "rgb reflectance" [0.5 0.5 0.5]
+Shape "trianglemesh" "point3 P" [-10 -10 0 10 -10 0 10 10 0 -10 10 0] "integer indices" [0 1 2 0 2 3]
+""")
+    y = luminance(render_mean(path))
+    # The centre pixel spans 2/9 units: cos^3 falloff across it is < 1%.
+    assert y[4, 4] == pytest.approx(0.5 / math.pi * 8 / 4, rel=0.02)
+    assert y[0, 0] == 0.0 and y[4, 0] == 0.0
