@@ -313,6 +313,16 @@ Shape "disk" "float radius" 2
 """
     p1 = write(tmp_path, tmpl.format(L='"rgb L" [1 1 1] "float power" 50'), "a.pbrt")
     assert luminance(render_mean(p1)).mean() == pytest.approx(50 / (math.pi * math.pi * 4), rel=0.01)
+    # A mesh: pbrt-v4 gives every triangle the whole power (one light per triangle), so a
+    # square of two triangles of area A/2 each has radiance P / (pi A / 2).
+    p4 = write(tmp_path, tmpl.format(L='"rgb L" [1 1 1] "float power" 50').replace(
+        'Shape "disk" "float radius" 2', 'Shape "trianglemesh" "point3 P" [-2 -2 0 2 -2 0 2 2 0 -2 2 0] '
+                                         '"integer indices" [0 1 2 0 2 3]'), "d.pbrt")
+    assert luminance(render_mean(p4)).mean() == pytest.approx(50 / (math.pi * 8), rel=0.01)
+    # A scaled sphere: pbrt-v4 divides by its object-space area (4 pi r^2, the scale ignored).
+    p5 = write(tmp_path, tmpl.format(L='"rgb L" [1 1 1] "float power" 50').replace(
+        'Shape "disk" "float radius" 2', 'Scale 2 2 2\nShape "sphere" "float radius" 1'), "e.pbrt")
+    assert luminance(render_mean(p5)).mean() == pytest.approx(50 / (math.pi * 4 * math.pi), rel=0.01)
     p2 = write(tmp_path, tmpl.format(L='"blackbody L" 3500 "float scale" 3'), "b.pbrt")
     img = render_mean(p2)
     assert luminance(img).mean() == pytest.approx(3.0, rel=0.02)

@@ -745,10 +745,27 @@ class PBRTScene:
         if not os.path.exists(fname):
             write_ply(fname, pw, tri, nw, uv)
         shape = {"type": "ply", "filename": fname}
-        shape["_area"] = float(0.5 * np.linalg.norm(e, axis=1).sum())
+        shape["_tri_areas"] = 0.5 * np.linalg.norm(e, axis=1)
         return shape
 
     def shape(self, p: _Params, t: str) -> dict | None:
+        s = self._shape(p, t)
+        if s is not None and t in ("sphere", "disk", "cylinder"):
+            # pbrt-v4's Area() of a quadric, in object space (what an area light's
+            # 'power' divides by): phimax r (zmax - zmin), phimax (r^2 - ri^2) / 2.
+            r = p.one("radius", "float", 1.0)
+            ph = math.radians(min(p.one("phimax", "float", 360.0), 360.0))
+            if t == "sphere":
+                zmin = max(p.one("zmin", "float", -r), -r)
+                zmax = min(p.one("zmax", "float", r), r)
+                s["_light_area"] = ph * r * (zmax - zmin)
+            elif t == "disk":
+                s["_light_area"] = ph * 0.5 * (r * r - p.one("innerradius", "float", 0.0) ** 2)
+            else:
+                s["_light_area"] = ph * r * (p.one("zmax", "float", 1.0) - p.one("zmin", "float", -1.0))
+        return s
+
+    def _shape(self, p: _Params, t: str) -> dict | None:
         m = self.ctm()
         rev = self.state.reverse
         if t == "sphere":
@@ -758,9 +775,8 @@ class PBRTScene:
                 # World-space centre and radius: Mitsuba's sphere takes no reflections or
                 # non-uniform scales in to_world (ellipsoids become meshes below).
                 k = abs(np.linalg.det(m[:3, :3])) ** (1.0 / 3.0)
-                s = {"type": "sphere", "center": [float(x) for x in m[:3, 3]], "radius": r * k, "flip_normals": rev}
-                s["_area"] = 4 * math.pi * (r * k) ** 2
-                return s
+                return {"type": "sphere", "center": [float(x) for x in m[:3, 3]], "radius": r * k,
+                        "flip_normals": rev}
             if zmin <= -r and zmax >= r and phimax >= 360:
                 return self.mesh(p, *_sphere_mesh(r, -r, r, 360.0))
             return self.mesh(p, *_sphere_mesh(r, max(zmin, -r), min(zmax, r), phimax))
@@ -768,19 +784,15 @@ class PBRTScene:
             h, r = p.one("height", "float", 0.0), p.one("radius", "float", 1.0)
             ri, phimax = p.one("innerradius", "float", 0.0), p.one("phimax", "float", 360.0)
             if ri <= 0 and phimax >= 360:
-                s = {"type": "disk", "to_world": _mi_transform(m @ _translate(0, 0, h) @ _scale(r, r, r)),
-                     "flip_normals": rev}
-                s["_area"] = math.pi * r * r * _area_scale(m)
-                return s
+                return {"type": "disk", "to_world": _mi_transform(m @ _translate(0, 0, h) @ _scale(r, r, r)),
+                        "flip_normals": rev}
             return self.mesh(p, *_disk_mesh(h, r, ri, phimax))
         if t == "cylinder":
             r = p.one("radius", "float", 1.0)
             zmin, zmax, phimax = p.one("zmin", "float", -1.0), p.one("zmax", "float", 1.0), p.one("phimax", "float", 360.0)
             if phimax >= 360 and abs(np.linalg.det(m[:3, :3])) > 0 and _is_similarity(m):
-                s = {"type": "cylinder", "radius": r, "p0": [0.0, 0.0, zmin], "p1": [0.0, 0.0, zmax],
-                     "to_world": _mi_transform(m), "flip_normals": rev}
-                s["_area"] = 2 * math.pi * r * (zmax - zmin) * _area_scale(m)
-                return s
+                return {"type": "cylinder", "radius": r, "p0": [0.0, 0.0, zmin], "p1": [0.0, 0.0, zmax],
+                        "to_world": _mi_transform(m), "flip_normals": rev}
             return self.mesh(p, *_cylinder_mesh(r, zmin, zmax, phimax))
         if t == "trianglemesh":
             pos = p.array("P", "point3", 3)
@@ -1372,9 +1384,21 @@ class PBRTScene:
         sc = p.one("scale", "float", 1.0) / lum
         power = p.one("power", "float", -1.0)
         if power > 0:
-            area = shape.get("_area")
-            if area is None or area <= 0:
+            # pbrt-v4 makes one light per shape: per quadric, per triangle of a mesh (each
+            # triangle gets the whole 'power').
+            if "_light_area" in shape:
+                area = shape["_light_area"]
+            elif "_tri_areas" in shape:
+                tri = shape["_tri_areas"]
+                area = float(tri.mean())
+                if tri.max() > 1.001 * tri.min():
+                    self.unsupported(sd, "'power' on a mesh of unequal triangles (pbrt-v4 gives each triangle "
+                                         "the power, so their radiances differ): the mean triangle's radiance "
+                                         "(the same total power) is used")
+            else:
                 raise p.error("power", f"the area of this {shape['type']!r} shape is unknown")
+            if not area > 0:
+                raise p.error("power", "the emitting shape has no area")
             k_e = math.pi * area * (2 if p.bool("twosided", False) else 1)
             sc *= power / k_e
         if isinstance(l, float):
