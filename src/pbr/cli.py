@@ -84,7 +84,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     r = sub.add_parser("render", help="render a scene to an image",
-                       description="Render SCENE (Mitsuba XML), or the built-in Cornell box.")
+                       description="Render SCENE (Mitsuba XML or pbrt-v4 .pbrt), or the built-in Cornell box.")
     r.add_argument("scene", nargs="?", metavar="SCENE",
                    help="scene file; omitted: the built-in Cornell box")
     r.add_argument("-o", "--output", metavar="OUT",

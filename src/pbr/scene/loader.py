@@ -27,6 +27,7 @@ from ..plugins.props import FINITE, KNOWN_TYPES, Props, SceneError, did_you_mean
 from ..textures import TEXTURE_TYPES, TextureSet, load_spectrum
 from .objects import load_object
 from .params import mitsuba_key_paths
+from .pbrt import convert as pbrt_convert
 from .scene import Scene, ShapeList
 from .xml import locate, parse_file_lines, parse_string, tag_types
 
@@ -294,8 +295,10 @@ def load_dict(d: dict, base_dir: str | None = None, parallel: bool = True, optim
 
 @backend.uses_pbr_variant
 def load_file(path: str, parallel: bool = True, optimize: bool = True, **kwargs):
-    """Load a Mitsuba XML scene; keyword arguments override its ``<default>`` values.
-    ``parallel`` and ``optimize`` are Mitsuba's keywords, ignored (see :func:`load_dict`)."""
+    """Load a Mitsuba XML scene (keyword arguments override its ``<default>`` values) or a
+    pbrt-v4 scene (``.pbrt``, ``.pbrt.gz``: keywords ``spp``, ``res``, ``width``,
+    ``height``, ``maxdepth``, ``approximate``; see :mod:`pbr.scene.pbrt`). ``parallel``
+    and ``optimize`` are Mitsuba's keywords, ignored (see :func:`load_dict`)."""
     return load_xml_file(path, None, **kwargs)
 
 
@@ -312,11 +315,14 @@ def load_xml_file(path: str, edit=None, **kwargs):
     loaded (the command line's film-size options); errors name ``file:line``."""
     if not os.path.exists(path):
         raise FileNotFoundError(f"{path}: scene file not found")
-    ext = os.path.splitext(path)[1].lower()
-    if ext != ".xml":
-        raise SceneError(f"{path}: unsupported scene format {ext!r} (supported: .xml)")
-    backend.ensure()   # the XML reader builds Mitsuba transforms: a variant must be set
-    d, lines = parse_file_lines(path, **kwargs)
+    ext = ".pbrt" if path.lower().endswith(".pbrt.gz") else os.path.splitext(path)[1].lower()
+    if ext not in (".xml", ".pbrt"):
+        raise SceneError(f"{path}: unsupported scene format {ext!r} (supported: .xml, .pbrt)")
+    backend.ensure()   # the readers build Mitsuba transforms: a variant must be set
+    if ext == ".pbrt":
+        d, _, lines = pbrt_convert(path, **kwargs)
+    else:
+        d, lines = parse_file_lines(path, **kwargs)
     if edit is not None:
         edit(d)
     try:

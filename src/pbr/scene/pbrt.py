@@ -1,0 +1,1749 @@
+"""pbrt-v4 scene files -> pbr/Mitsuba scene dicts (``to_dict``), so that
+``pbr.load_file("scene.pbrt")`` renders them.
+
+The directives are interpreted with pbrt-v4's graphics state: the current transformation
+matrix (CTM), named coordinate systems, the attribute stack (``AttributeBegin/End``,
+``TransformBegin/End``), ``ReverseOrientation``, the current material, area light and
+media, named materials/textures/media, object instances, ``Include`` and ``Import``.
+Each pbrt-v4 plugin is mapped to pbr's plugin of the same model, with pbrt-v4's defaults
+and units (docs/pbrt.md lists every mapping and what is approximated or left out):
+
+* Cameras: pbrt's camera space is left-handed (x to the right on the image); Mitsuba's
+  is right-handed with x to the left, so ``to_world = inverse(CTM) @ Scale(-1, 1, 1)``;
+  ``fov`` is the field of view of the shorter image axis (Mitsuba's ``fov_axis``
+  'smaller').
+* Lights: pbrt-v4 divides every light's spectrum by its luminance
+  (``SpectrumToPhotometric``) before ``scale``/``power``: RGB values are already of unit
+  luminance in pbr (rgb times a D65 of unit luminance), other spectra (``blackbody``,
+  sampled) are divided by their luminance here.
+* Meshes are written to PLY files (``mesh_dir``) in world space, with pbrt-v4's
+  orientation: a triangle's normal follows its vertex normals if it has them, else its
+  winding, flipped by ``ReverseOrientation`` and by transforms that swap handedness.
+
+Errors raise :class:`~pbr.scene.xml.XMLError` naming ``file:line`` and the directive.
+With ``approximate=True`` features pbr lacks are replaced by the nearest supported one
+and listed in the dict's ``notes`` (:func:`convert`) instead of raising.
+"""
+from __future__ import annotations
+
+import gzip
+import hashlib
+import math
+import os
+import tempfile
+
+import numpy as np
+
+from .. import backend
+from ..cameras import SENSORS
+from ..films import FILMS
+from ..filters import FILTERS
+from ..integrators import INTEGRATORS
+from ..spectrum import CIE_Y_INTEGRAL, LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, blackbody, cie_tables_np
+from ..textures import TEXTURE_TYPES
+from .pbrt_tokens import Directive, Param, read_directives, resolve
+from .xml import XMLError
+
+__all__ = ["to_dict", "convert", "PBRTScene"]
+
+
+# -- transforms (4x4 numpy, pbrt-v4's conventions) ---------------------------------------
+
+def _translate(x, y, z):
+    m = np.eye(4)
+    m[:3, 3] = (x, y, z)
+    return m
+
+
+def _scale(x, y, z):
+    return np.diag([x, y, z, 1.0])
+
+
+def _rotate(angle, axis):
+    a = np.asarray(axis, dtype=np.float64)
+    n = np.linalg.norm(a)
+    if n == 0:
+        raise ValueError("rotation axis is zero")
+    x, y, z = a / n
+    s, c = math.sin(math.radians(angle)), math.cos(math.radians(angle))
+    m = np.eye(4)
+    m[:3, :3] = [[x * x + (1 - x * x) * c, x * y * (1 - c) - z * s, x * z * (1 - c) + y * s],
+                 [x * y * (1 - c) + z * s, y * y + (1 - y * y) * c, y * z * (1 - c) - x * s],
+                 [x * z * (1 - c) - y * s, y * z * (1 - c) + x * s, z * z + (1 - z * z) * c]]
+    return m
+
+
+def _look_at(pos, look, up):
+    """pbrt-v4's ``LookAt``: camera-from-world (the camera looks down +z, y up)."""
+    pos, look, up = (np.asarray(v, dtype=np.float64) for v in (pos, look, up))
+    d = look - pos
+    if np.linalg.norm(d) == 0:
+        raise ValueError("'up' and the viewing direction are undefined: eye and look-at point coincide")
+    d /= np.linalg.norm(d)
+    right = np.cross(up / max(np.linalg.norm(up), 1e-300), d)
+    if np.linalg.norm(right) == 0:
+        raise ValueError("'up' vector and viewing direction are parallel")
+    right /= np.linalg.norm(right)
+    new_up = np.cross(d, right)
+    world_from_camera = np.eye(4)
+    world_from_camera[:3, 0], world_from_camera[:3, 1], world_from_camera[:3, 2] = right, new_up, d
+    world_from_camera[:3, 3] = pos
+    return np.linalg.inv(world_from_camera)
+
+
+def _mi_transform(m):
+    import mitsuba as mi
+    return mi.ScalarTransform4f(np.asarray(m, dtype=np.float64))
+
+
+# -- spectra -----------------------------------------------------------------------------
+
+# pbrt-v4's named glasses that pbr has no dispersion data for: their IOR near 587.6 nm
+# (from pbrt-v4's tables), used under ``approximate``.
+_GLASS_ND = {"glass-fk51a": 1.4869, "glass-lasf9": 1.8509, "glass-f5": 1.6732, "glass-f10": 1.7277}
+
+# pbrt-v4's named metal spectra and the Mitsuba IOR data of the same metal.
+_METALS = {"Ag": "Ag", "Al": "Al", "Au": "Au", "Cu": "Cu", "CuZn": "CuZn", "MgO": "MgO", "TiO2": "TiO2"}
+
+
+def luminance_of(values: np.ndarray, lam: np.ndarray) -> float:
+    """The luminance of a spectrum sampled at ``lam`` (nm), in pbr's units
+    (``int s ybar / int ybar``, the value a constant spectrum of 1 has)."""
+    xyz, _ = cie_tables_np()
+    grid = LAMBDA_MIN + 5.0 * np.arange(len(xyz))
+    s = np.interp(grid, lam, values, left=0.0, right=0.0)
+    return float(np.trapezoid(s * xyz[:, 1], grid) / CIE_Y_INTEGRAL)
+
+
+def _blackbody_luminance(t: float) -> float:
+    lam = np.arange(LAMBDA_MIN, LAMBDA_MAX + 1.0)
+    return luminance_of(blackbody(lam, t), lam)
+
+
+def _blackbody_peak(t: float) -> float:
+    """pbrt-v4's BlackbodySpectrum normalisation: Planck's law at its peak (Wien)."""
+    return float(blackbody(np.array([2.8977721e-3 / t * 1e9]), t)[0])
+
+
+def _read_spd(path: str, where: str) -> np.ndarray:
+    """A pbrt-v4 spectrum file: (wavelength, value) pairs, ``#`` comments."""
+    try:
+        with open(path) as f:
+            vals = [float(x) for line in f for x in line.split("#", 1)[0].split()]
+    except (OSError, ValueError) as e:
+        raise XMLError(f"{where}: cannot read spectrum file {path!r}: {e}") from None
+    if len(vals) < 2 or len(vals) % 2:
+        raise XMLError(f"{where}: spectrum file {path!r} needs (wavelength, value) pairs")
+    return np.array(vals).reshape(-1, 2)
+
+
+# -- mesh files ---------------------------------------------------------------------------
+
+def write_ply(path: str, p: np.ndarray, f: np.ndarray, n=None, uv=None) -> None:
+    """A binary little-endian PLY file that Mitsuba's and pbr's loaders read."""
+    cols = [p.astype("<f4")]
+    props = ["x", "y", "z"]
+    if n is not None:
+        cols.append(n.astype("<f4"))
+        props += ["nx", "ny", "nz"]
+    if uv is not None:
+        cols.append(uv.astype("<f4"))
+        props += ["u", "v"]
+    vert = np.ascontiguousarray(np.hstack(cols), dtype="<f4")
+    head = ["ply", "format binary_little_endian 1.0", f"element vertex {len(p)}"]
+    head += [f"property float {c}" for c in props]
+    head += [f"element face {len(f)}", "property list uchar int vertex_indices", "end_header"]
+    faces = np.zeros(len(f), dtype=[("n", "u1"), ("i", "<i4", (3,))])
+    faces["n"] = 3
+    faces["i"] = f
+    tmp = path + f".{os.getpid()}.tmp"
+    with open(tmp, "wb") as out:
+        out.write(("\n".join(head) + "\n").encode())
+        out.write(vert.tobytes())
+        out.write(faces.tobytes())
+    os.replace(tmp, path)
+
+
+def _read_ply(path: str, where: str):
+    """(positions, triangles, normals or None, uv or None) of a PLY file (``.ply.gz`` too)."""
+    import io
+    import trimesh
+    try:
+        if path.endswith(".gz"):
+            with gzip.open(path, "rb") as fh:
+                data = io.BytesIO(fh.read())
+            mesh = trimesh.load(data, file_type="ply", process=False, maintain_order=True)
+        else:
+            mesh = trimesh.load(path, file_type="ply", process=False, maintain_order=True)
+    except Exception as e:
+        raise XMLError(f"{where}: Shape: cannot read PLY file {path!r}: {e}") from None
+    if not isinstance(mesh, trimesh.Trimesh):
+        raise XMLError(f"{where}: Shape: {path!r} holds no triangle mesh (a point cloud or several meshes)")
+    p = np.asarray(mesh.vertices, dtype=np.float64)
+    f = np.asarray(mesh.faces, dtype=np.int64)
+    has_n = "vertex_normals" in mesh._cache.cache
+    n = np.asarray(mesh.vertex_normals, dtype=np.float64) if has_n else None
+    vis = getattr(mesh, "visual", None)
+    uv = None
+    if vis is not None and getattr(vis, "uv", None) is not None and len(vis.uv) == len(p):
+        uv = np.asarray(vis.uv, dtype=np.float64)
+    return p, f, n, uv
+
+
+# -- the converter -------------------------------------------------------------------------
+
+class _Params:
+    """The parameters of one directive, read by name with pbrt-v4's types and defaults."""
+
+    def __init__(self, d: Directive, conv: "PBRTScene", defaults: list | None = None):
+        self.d, self.conv = d, conv
+        self.p = {q.name: q for q in d.params}
+        for q in defaults or ():          # ``Attribute`` defaults, overridden by the directive's own
+            self.p.setdefault(q.name, q)
+
+    def error(self, name: str | None, msg: str) -> XMLError:
+        where = self.p[name].where if name in self.p else self.d.where
+        key = f"parameter {name!r}: " if name else ""
+        return XMLError(f"{where}: {self.d.name}: {key}{msg}")
+
+    def has(self, name):
+        return name in self.p
+
+    def _get(self, name, types):
+        q = self.p.get(name)
+        if q is None:
+            return None
+        if q.type not in types:
+            raise self.error(name, f"expected type {' or '.join(types)}, got {q.type}")
+        q.used = True
+        return q
+
+    def one(self, name, ptype, default=None):
+        q = self._get(name, (ptype,) if ptype != "float" else ("float", "integer"))
+        if q is None:
+            return default
+        if len(q.values) != 1:
+            raise self.error(name, f"expected one value, got {len(q.values)}")
+        return q.values[0]
+
+    def floats(self, name, default=None):
+        q = self._get(name, ("float", "integer"))
+        return default if q is None else [float(v) for v in q.values]
+
+    def ints(self, name, default=None):
+        q = self._get(name, ("integer",))
+        return default if q is None else list(q.values)
+
+    def array(self, name, ptype, width):
+        synonyms = {"point3": ("point3", "vector3", "normal"), "normal": ("normal", "vector3"),
+                    "point2": ("point2", "vector2", "float")}
+        q = self._get(name, synonyms.get(ptype, (ptype,)))
+        if q is None:
+            return None
+        return np.asarray(q.values, dtype=np.float64).reshape(-1, width)
+
+    def vec3(self, name, default):
+        q = self._get(name, ("point3", "vector3", "normal"))
+        if q is None:
+            return np.asarray(default, dtype=np.float64)
+        if len(q.values) != 3:
+            raise self.error(name, f"expected one 3-vector, got {len(q.values)} values")
+        return np.asarray(q.values, dtype=np.float64)
+
+    def string(self, name, default=None):
+        return self.one(name, "string", default)
+
+    def bool(self, name, default):
+        return self.one(name, "bool", default)
+
+    def texture_name(self, name):
+        q = self.p.get(name)
+        return q.values[0] if q is not None and q.type == "texture" else None
+
+    def value(self, name, default=None, kind="albedo"):
+        """A spectrum or float parameter as a pbr value: a float, an RGB/spectrum dict, a
+        named texture, or ``default``. ``kind``: 'albedo' (reflectances), 'unbounded'
+        (IORs, coefficients), 'illuminant' (emission: see :meth:`emission`)."""
+        q = self.p.get(name)
+        if q is None:
+            return default
+        q.used = True
+        return self.conv.spectrum_value(q, self, kind)
+
+    def unused(self):
+        return [q for q in self.p.values() if not q.used and q in self.d.params]
+
+
+class _State:
+    """pbrt-v4's graphics state (saved by ``AttributeBegin``)."""
+
+    def __init__(self):
+        self.ctm = [np.eye(4), np.eye(4)]       # start and end transforms
+        self.active = [True, True]
+        self.reverse = False
+        self.material = None                    # (kind, key): ('named', name) or ('anon', key)
+        self.area = None                        # the AreaLightSource directive
+        self.inside = self.outside = None
+        self.attributes = {k: [] for k in ("shape", "light", "material", "medium", "texture")}
+        self.color_space = "srgb"
+
+    def copy(self):
+        s = _State()
+        s.ctm = [m.copy() for m in self.ctm]
+        s.active = list(self.active)
+        s.reverse, s.material, s.area = self.reverse, self.material, self.area
+        s.inside, s.outside, s.color_space = self.inside, self.outside, self.color_space
+        s.attributes = {k: list(v) for k, v in self.attributes.items()}
+        return s
+
+
+class PBRTScene:
+    """Reads a pbrt-v4 scene file into a Mitsuba-style dict (see the module docstring)."""
+
+    def __init__(self, path: str, approximate: bool = False, mesh_dir: str | None = None, overrides=None,
+                 skip_missing: bool = False):
+        self.path = os.path.abspath(path)
+        self.skip_missing = skip_missing
+        self.base = os.path.dirname(self.path)
+        self.approximate = approximate
+        self.mesh_dir = mesh_dir or os.path.join(tempfile.gettempdir(), "pbr-pbrt-meshes")
+        self.overrides = dict(overrides or {})
+        self.notes: list[str] = []
+        self.state = _State()
+        self.stack: list[tuple[str, _State, str]] = []
+        self.named_cs: dict[str, list] = {}
+        self.named_materials: dict[str, str] = {}        # name -> key in out
+        self.textures = {"float": {}, "spectrum": {}}
+        self.media: dict[str, str] = {}
+        self.objects: dict[str, str] = {}                 # instance definitions -> shapegroup key
+        self.current_object = None
+        self.out = {"type": "scene"}
+        self.lines: dict[str, str] = {}
+        self.counts: dict[str, int] = {}
+        self.camera = self.film = self.sampler = self.filter = self.integrator = None
+        self.camera_medium = None
+        self.world = False
+        self.including: list[str] = []
+        self.default_material = None
+        self.transform_times = (0.0, 1.0)
+
+    # -- bookkeeping -------------------------------------------------------------------
+    def note(self, where: str, msg: str) -> None:
+        self.notes.append(f"{where}: {msg}")
+
+    def unsupported(self, d: Directive, msg: str) -> None:
+        """A feature pbr lacks: an error, or a note under ``approximate``. ``msg`` is
+        'feature' or 'feature: substitute is used'."""
+        feature, subst = msg, "ignored"
+        if msg.endswith(" is used") and ": " in msg:
+            feature, subst = msg.rsplit(": ", 1)
+        if not self.approximate:
+            raise XMLError(f"{d.where}: {d.name}: {feature} is not supported by pbr "
+                           f"(with approximate=True: {subst}, noted)")
+        self.note(d.where, f"{d.name}: {feature} is not supported: {subst}")
+
+    def missing(self, where: str, directive: str, name: str, full: str) -> None:
+        """A file that does not exist: an error, or a note under ``skip_missing`` (the
+        caller then leaves the object out or substitutes a constant)."""
+        msg = f"file not found: {name!r} (looked for {full})"
+        if not self.skip_missing:
+            raise XMLError(f"{where}: {directive}: {msg}")
+        self.note(where, f"{directive}: {msg}; left out")
+
+    def add(self, prefix: str, v: dict, where: str, key: str | None = None) -> str:
+        if key is None:
+            self.counts[prefix] = self.counts.get(prefix, 0) + 1
+            key = f"{prefix}_{self.counts[prefix]:04d}"
+        self.out[key] = v
+        self.lines[f"scene.{key}"] = where
+        return key
+
+    def ctm(self):
+        return self.state.ctm[0]
+
+    # -- reading -----------------------------------------------------------------------
+    def read(self) -> dict:
+        self.run_file(self.path)
+        if self.stack:
+            raise XMLError(f"{self.stack[-1][2]}: {self.stack[-1][0]}Begin: no matching {self.stack[-1][0]}End")
+        if self.current_object is not None:
+            raise XMLError(f"{self.current_object[1]}: ObjectBegin: no matching ObjectEnd")
+        self.finish()
+        return self.out
+
+    def run_file(self, path: str, where: str | None = None) -> None:
+        if path in self.including:
+            raise XMLError(f"{where}: Include: {path!r} includes itself")
+        if not os.path.exists(path):
+            raise XMLError(f"{where or path + ':0'}: file not found: {path!r}")
+        self.including.append(path)
+        try:
+            for d in read_directives(path):
+                self.directive(d)
+        finally:
+            self.including.pop()
+
+    def directive(self, d: Directive) -> None:
+        h = getattr(self, f"_d_{d.name}", None)
+        if h is None:
+            raise XMLError(f"{d.where}: unknown directive {d.name!r}")
+        try:
+            h(d)
+        except XMLError:
+            raise
+        except (ValueError, TypeError, IndexError, KeyError) as e:
+            raise XMLError(f"{d.where}: {d.name}: {e}") from None
+
+    def args(self, d: Directive, n: int, kind=str, allow_params=False):
+        if len(d.args) != n or not all(isinstance(a, kind) if kind is str else isinstance(a, (int, float))
+                                       for a in d.args):
+            what = "strings" if kind is str else "numbers"
+            raise XMLError(f"{d.where}: {d.name}: expected {n} {what}, got {d.args}")
+        if d.params and not allow_params:
+            raise XMLError(f"{d.where}: {d.name}: takes no parameters")
+        return d.args
+
+    def warn_unused(self, p: _Params, what: str) -> None:
+        for q in p.unused():
+            self.note(q.where, f"{p.d.name}: parameter {q.name!r} of {what} is not used by pbr")
+
+    # -- transforms --------------------------------------------------------------------
+    def _apply(self, f):
+        for i in (0, 1):
+            if self.state.active[i]:
+                self.state.ctm[i] = f(self.state.ctm[i])
+
+    def _d_Identity(self, d):
+        self.args(d, 0)
+        self._apply(lambda m: np.eye(4))
+
+    def _d_Translate(self, d):
+        a = self.args(d, 3, float)
+        self._apply(lambda m: m @ _translate(*a))
+
+    def _d_Scale(self, d):
+        a = self.args(d, 3, float)
+        self._apply(lambda m: m @ _scale(*a))
+
+    def _d_Rotate(self, d):
+        a = self.args(d, 4, float)
+        r = _rotate(a[0], a[1:])
+        self._apply(lambda m: m @ r)
+
+    def _d_LookAt(self, d):
+        a = self.args(d, 9, float)
+        r = _look_at(a[0:3], a[3:6], a[6:9])
+        self._apply(lambda m: m @ r)
+
+    def _matrix(self, d):
+        a = self.args(d, 16, float)
+        m = np.asarray(a, dtype=np.float64).reshape(4, 4).T   # pbrt lists the matrix column by column
+        if abs(np.linalg.det(m)) < 1e-300:
+            raise XMLError(f"{d.where}: {d.name}: the matrix is singular")
+        return m
+
+    def _d_Transform(self, d):
+        m = self._matrix(d)
+        self._apply(lambda _: m.copy())
+
+    def _d_ConcatTransform(self, d):
+        m = self._matrix(d)
+        self._apply(lambda c: c @ m)
+
+    def _d_CoordinateSystem(self, d):
+        name, = self.args(d, 1)
+        self.named_cs[name] = [m.copy() for m in self.state.ctm]
+
+    def _d_CoordSysTransform(self, d):
+        name, = self.args(d, 1)
+        if name not in self.named_cs:
+            raise XMLError(f"{d.where}: {d.name}: unknown coordinate system {name!r} "
+                           f"(known: {', '.join(sorted(self.named_cs)) or 'none'})")
+        self.state.ctm = [m.copy() for m in self.named_cs[name]]
+
+    def _d_TransformTimes(self, d):
+        a = self.args(d, 2, float)
+        self.transform_times = tuple(a)
+
+    def _d_ActiveTransform(self, d):
+        which, = [str(a) for a in d.args] if len(d.args) == 1 else [None]
+        choices = {"StartTime": [True, False], "EndTime": [False, True], "All": [True, True]}
+        if which not in choices:
+            raise XMLError(f"{d.where}: {d.name}: expected StartTime, EndTime or All, got {d.args}")
+        self.state.active = choices[which]
+
+    def _d_ReverseOrientation(self, d):
+        self.args(d, 0)
+        self.state.reverse = not self.state.reverse
+
+    # -- attribute stack -------------------------------------------------------------------
+    def _d_AttributeBegin(self, d):
+        self.args(d, 0)
+        self.stack.append(("Attribute", self.state.copy(), d.where))
+
+    def _d_AttributeEnd(self, d):
+        self.args(d, 0)
+        if not self.stack or self.stack[-1][0] != "Attribute":
+            raise XMLError(f"{d.where}: AttributeEnd: no matching AttributeBegin")
+        self.state = self.stack.pop()[1]
+
+    def _d_TransformBegin(self, d):
+        self.args(d, 0)
+        self.note(d.where, "TransformBegin is deprecated in pbrt-v4 (AttributeBegin saves the transform)")
+        self.stack.append(("Transform", self.state.copy(), d.where))
+
+    def _d_TransformEnd(self, d):
+        self.args(d, 0)
+        if not self.stack or self.stack[-1][0] != "Transform":
+            raise XMLError(f"{d.where}: TransformEnd: no matching TransformBegin")
+        saved = self.stack.pop()[1]
+        self.state.ctm, self.state.active = saved.ctm, saved.active
+
+    def _d_Attribute(self, d):
+        target, = self.args(d, 1, allow_params=True)
+        if target not in self.state.attributes:
+            raise XMLError(f"{d.where}: Attribute: unknown target {target!r} "
+                           f"(pbrt-v4's: {', '.join(self.state.attributes)})")
+        self.state.attributes[target] = [q for q in self.state.attributes[target]
+                                         if q.name not in {p.name for p in d.params}] + list(d.params)
+
+    def _d_Option(self, d):
+        self.args(d, 0, allow_params=True)
+        for q in d.params:
+            self.note(q.where, f"Option {q.name!r} ignored (pbr has no pbrt-v4 options)")
+
+    def _d_ColorSpace(self, d):
+        name, = self.args(d, 1)
+        if name.lower() != "srgb":
+            self.unsupported(d, f"color space {name!r} (pbr renders in linear sRGB)")
+        self.state.color_space = name
+
+    def _d_Accelerator(self, d):
+        self.args(d, 1, allow_params=True)
+        self.note(d.where, "Accelerator ignored (Mitsuba's ray tracer builds its own BVH)")
+
+    def _d_Include(self, d):
+        name, = self.args(d, 1)
+        full = resolve(name, self.base)
+        if not os.path.exists(full):
+            return self.missing(d.where, d.name, name, full)
+        self.run_file(full, d.where)
+
+    def _d_Import(self, d):
+        # pbrt-v4 parses imported files in parallel; their named objects join the scene.
+        self._d_Include(d)
+
+    def _d_WorldBegin(self, d):
+        self.args(d, 0)
+        if self.world:
+            raise XMLError(f"{d.where}: WorldBegin: given twice")
+        self.world = True
+        self.state.ctm = [np.eye(4), np.eye(4)]
+        self.named_cs["world"] = [np.eye(4), np.eye(4)]
+
+    def _d_WorldEnd(self, d):
+        self.note(d.where, "WorldEnd is pbrt-v3 syntax; ignored")
+
+    # -- rendering options -----------------------------------------------------------------
+    def _option(self, d, attr):
+        if self.world:
+            raise XMLError(f"{d.where}: {d.name}: must come before WorldBegin")
+        self.args(d, 1, allow_params=True)
+        setattr(self, attr, d)
+
+    def _d_Camera(self, d):
+        self._option(d, "camera")
+        self.camera_ctm = [m.copy() for m in self.state.ctm]
+        self.named_cs["camera"] = [np.linalg.inv(m) for m in self.state.ctm]
+        self.camera_medium = self.state.outside
+
+    def _d_Film(self, d):
+        self._option(d, "film")
+
+    def _d_Sampler(self, d):
+        self._option(d, "sampler")
+
+    def _d_PixelFilter(self, d):
+        self._option(d, "filter")
+
+    def _d_Integrator(self, d):
+        self._option(d, "integrator")
+
+    # -- named things ------------------------------------------------------------------------
+    def _d_MakeNamedMedium(self, d):
+        name, = self.args(d, 1, allow_params=True)
+        p = _Params(d, self, self.state.attributes["medium"])
+        key = self.add("medium", self.medium(p), d.where, key=f"medium_{_safe(name)}")
+        self.media[name] = key
+
+    def _d_MediumInterface(self, d):
+        if len(d.args) not in (1, 2) or not all(isinstance(a, str) for a in d.args):
+            raise XMLError(f"{d.where}: MediumInterface: expected one or two medium names, got {d.args}")
+        inside, outside = (d.args[0], d.args[0]) if len(d.args) == 1 else d.args
+        for n in (inside, outside):
+            if n and n not in self.media:
+                raise XMLError(f"{d.where}: MediumInterface: unknown medium {n!r} "
+                               f"(known: {', '.join(sorted(self.media)) or 'none'})")
+        self.state.inside, self.state.outside = inside or None, outside or None
+
+    def _d_Texture(self, d):
+        if len(d.args) != 3 or not all(isinstance(a, str) for a in d.args):
+            raise XMLError(f"{d.where}: Texture: expected a name, a type ('float' or 'spectrum') and a class, got {d.args}")
+        name, kind, cls = d.args
+        if kind not in ("float", "spectrum"):
+            raise XMLError(f"{d.where}: Texture: type must be 'float' or 'spectrum', got {kind!r}")
+        p = _Params(d, self, self.state.attributes["texture"])
+        self.textures[kind][name] = self.texture(p, cls, kind)
+        self.warn_unused(p, f"texture {name!r}")
+
+    def _d_Material(self, d):
+        t, = self.args(d, 1, allow_params=True)
+        p = _Params(d, self, self.state.attributes["material"])
+        key = self.add("material", self.material(p, t), d.where)
+        self.state.material = key
+
+    def _d_MakeNamedMaterial(self, d):
+        name, = self.args(d, 1, allow_params=True)
+        p = _Params(d, self, self.state.attributes["material"])
+        t = p.string("type")
+        if t is None:
+            raise XMLError(f"{d.where}: MakeNamedMaterial: {name!r} needs a \"string type\" parameter")
+        key = f"mat_{_safe(name)}"
+        if key in self.out:
+            self.note(d.where, f"MakeNamedMaterial: {name!r} redefined")
+        self.add("material", self.material(p, t), d.where, key=key)
+        self.named_materials[name] = key
+
+    def _d_NamedMaterial(self, d):
+        name, = self.args(d, 1)
+        if name not in self.named_materials:
+            raise XMLError(f"{d.where}: NamedMaterial: unknown material {name!r}")
+        self.state.material = self.named_materials[name]
+
+    # -- lights --------------------------------------------------------------------------------
+    def _d_LightSource(self, d):
+        t, = self.args(d, 1, allow_params=True)
+        if self.current_object is not None:
+            raise XMLError(f"{d.where}: LightSource: lights inside ObjectBegin/ObjectEnd are not supported by pbrt-v4")
+        p = _Params(d, self, self.state.attributes["light"])
+        light = self.light(p, t)
+        if light is not None:
+            self.add("light", light, d.where)
+        self.warn_unused(p, f"light {t!r}")
+
+    def _d_AreaLightSource(self, d):
+        t, = self.args(d, 1, allow_params=True)
+        if t != "diffuse":
+            raise XMLError(f"{d.where}: AreaLightSource: unknown type {t!r} (pbrt-v4's: 'diffuse')")
+        self.state.area = d
+
+    # -- instancing ------------------------------------------------------------------------------
+    def _d_ObjectBegin(self, d):
+        name, = self.args(d, 1)
+        if self.current_object is not None:
+            raise XMLError(f"{d.where}: ObjectBegin: nested inside {self.current_object[0]!r}")
+        self.stack.append(("Attribute", self.state.copy(), d.where))
+        key = f"object_{_safe(name)}"
+        self.out[key] = {"type": "shapegroup"}
+        self.lines[f"scene.{key}"] = d.where
+        self.objects[name] = key
+        self.current_object = (name, d.where, key)
+
+    def _d_ObjectEnd(self, d):
+        self.args(d, 0)
+        if self.current_object is None:
+            raise XMLError(f"{d.where}: ObjectEnd: no matching ObjectBegin")
+        key = self.current_object[2]
+        if len(self.out[key]) == 1:       # an empty object: nothing to instance
+            del self.out[key]
+        self.current_object = None
+        self._d_AttributeEnd(Directive("AttributeEnd", [], [], d.where))
+
+    def _d_ObjectInstance(self, d):
+        name, = self.args(d, 1)
+        if name not in self.objects:
+            raise XMLError(f"{d.where}: ObjectInstance: unknown object {name!r}")
+        key = self.objects[name]
+        if key not in self.out:
+            return
+        self.add("instance", {"type": "instance", "to_world": _mi_transform(self.ctm()),
+                              "shapegroup": {"type": "ref", "id": key}}, d.where)
+
+    # -- shapes ----------------------------------------------------------------------------------
+    def _d_Shape(self, d):
+        t, = self.args(d, 1, allow_params=True)
+        p = _Params(d, self, self.state.attributes["shape"])
+        shape = self.shape(p, t)
+        if shape is None:
+            return
+        if self.state.ctm[0] is not self.state.ctm[1] and not np.allclose(self.state.ctm[0], self.state.ctm[1]):
+            self.unsupported(d, "animated transforms (ActiveTransform EndTime): the start transform is used")
+        mat = self.state.material
+        if mat is None:
+            if self.default_material is None:
+                self.default_material = self.add("material", {"type": "twosided", "bsdf": {
+                    "type": "diffuse", "reflectance": 0.5}}, d.where, key="mat_default")
+            mat = self.default_material
+        bsdf = {"type": "ref", "id": mat}
+        alpha = p.value("alpha", 1.0, kind="float")
+        if not (isinstance(alpha, float) and alpha >= 1.0):
+            bsdf = {"type": "mask", "opacity": alpha, "bsdf": bsdf}
+        shape["bsdf"] = bsdf
+        if self.state.area is not None:
+            if self.current_object is not None:
+                raise XMLError(f"{d.where}: Shape: area lights inside ObjectBegin/ObjectEnd are not supported by pbrt-v4")
+            shape["emitter"] = self.area_light(_Params(self.state.area, self, self.state.attributes["light"]),
+                                               shape, d)
+        if self.state.inside:
+            shape["interior"] = {"type": "ref", "id": self.media[self.state.inside]}
+        if self.state.outside:
+            shape["exterior"] = {"type": "ref", "id": self.media[self.state.outside]}
+        self.warn_unused(p, f"shape {t!r}")
+        if self.current_object is not None:
+            group = self.out[self.current_object[2]]
+            if "emitter" in shape:
+                del shape["emitter"]
+            k = f"shape_{len(group):04d}"
+            group[k] = shape
+            self.lines[f"scene.{self.current_object[2]}.{k}"] = d.where
+        else:
+            self.add("shape", shape, d.where)
+
+    def mesh(self, p: _Params, pos, tri, n=None, uv=None, where=None) -> dict:
+        """A ``ply`` shape for a triangle mesh given in object space: baked into world space
+        with pbrt-v4's orientation rules (see the module docstring)."""
+        m = self.ctm()
+        tri = np.asarray(tri, dtype=np.int64).reshape(-1, 3)
+        pos = np.asarray(pos, dtype=np.float64).reshape(-1, 3)
+        if len(tri) == 0:
+            raise p.error(None, "the mesh has no triangles")
+        if tri.min() < 0 or tri.max() >= len(pos):
+            raise p.error("indices", f"vertex indices must be in [0, {len(pos) - 1}], got [{tri.min()}, {tri.max()}]")
+        pw = pos @ m[:3, :3].T + m[:3, 3]
+        e = np.cross(pw[tri[:, 1]] - pw[tri[:, 0]], pw[tri[:, 2]] - pw[tri[:, 0]])
+        nw = None
+        if n is not None:
+            n = np.asarray(n, dtype=np.float64).reshape(-1, 3)
+            if len(n) != len(pos):
+                raise p.error("N", f"needs one normal per vertex ({len(pos)}), got {len(n)}")
+            nw = n @ np.linalg.inv(m[:3, :3])
+            nw /= np.maximum(np.linalg.norm(nw, axis=1, keepdims=True), 1e-30)
+            flip = np.einsum("ij,ij->i", e, nw[tri].sum(axis=1)) < 0
+        else:
+            flip = np.full(len(tri), self.state.reverse ^ (np.linalg.det(m[:3, :3]) < 0))
+        tri = tri.copy()
+        tri[flip] = tri[flip][:, [0, 2, 1]]
+        if uv is not None:
+            uv = np.asarray(uv, dtype=np.float64).reshape(-1, 2)
+            if len(uv) != len(pos):
+                raise p.error("uv", f"needs one (u, v) per vertex ({len(pos)}), got {len(uv)}")
+        os.makedirs(self.mesh_dir, exist_ok=True)
+        h = hashlib.sha1()
+        for a in (pw, tri, nw, uv):
+            h.update(b"-" if a is None else np.ascontiguousarray(a).tobytes())
+        fname = os.path.join(self.mesh_dir, f"{h.hexdigest()[:20]}.ply")
+        if not os.path.exists(fname):
+            write_ply(fname, pw, tri, nw, uv)
+        shape = {"type": "ply", "filename": fname}
+        shape["_tri_areas"] = 0.5 * np.linalg.norm(e, axis=1)
+        return shape
+
+    def shape(self, p: _Params, t: str) -> dict | None:
+        s = self._shape(p, t)
+        if s is not None and t in ("sphere", "disk", "cylinder"):
+            # pbrt-v4's Area() of a quadric, in object space (what an area light's
+            # 'power' divides by): phimax r (zmax - zmin), phimax (r^2 - ri^2) / 2.
+            r = p.one("radius", "float", 1.0)
+            ph = math.radians(min(p.one("phimax", "float", 360.0), 360.0))
+            if t == "sphere":
+                zmin = max(p.one("zmin", "float", -r), -r)
+                zmax = min(p.one("zmax", "float", r), r)
+                s["_light_area"] = ph * r * (zmax - zmin)
+            elif t == "disk":
+                s["_light_area"] = ph * 0.5 * (r * r - p.one("innerradius", "float", 0.0) ** 2)
+            else:
+                s["_light_area"] = ph * r * (p.one("zmax", "float", 1.0) - p.one("zmin", "float", -1.0))
+        return s
+
+    def _shape(self, p: _Params, t: str) -> dict | None:
+        m = self.ctm()
+        rev = self.state.reverse
+        if t == "sphere":
+            r = p.one("radius", "float", 1.0)
+            zmin, zmax, phimax = p.one("zmin", "float", -r), p.one("zmax", "float", r), p.one("phimax", "float", 360.0)
+            if zmin <= -r and zmax >= r and phimax >= 360 and _is_similarity(m):
+                # World-space centre and radius: Mitsuba's sphere takes no reflections or
+                # non-uniform scales in to_world (ellipsoids become meshes below).
+                k = abs(np.linalg.det(m[:3, :3])) ** (1.0 / 3.0)
+                return {"type": "sphere", "center": [float(x) for x in m[:3, 3]], "radius": r * k,
+                        "flip_normals": rev}
+            if zmin <= -r and zmax >= r and phimax >= 360:
+                return self.mesh(p, *_sphere_mesh(r, -r, r, 360.0))
+            return self.mesh(p, *_sphere_mesh(r, max(zmin, -r), min(zmax, r), phimax))
+        if t == "disk":
+            h, r = p.one("height", "float", 0.0), p.one("radius", "float", 1.0)
+            ri, phimax = p.one("innerradius", "float", 0.0), p.one("phimax", "float", 360.0)
+            if ri <= 0 and phimax >= 360:
+                return {"type": "disk", "to_world": _mi_transform(m @ _translate(0, 0, h) @ _scale(r, r, r)),
+                        "flip_normals": rev}
+            return self.mesh(p, *_disk_mesh(h, r, ri, phimax))
+        if t == "cylinder":
+            r = p.one("radius", "float", 1.0)
+            zmin, zmax, phimax = p.one("zmin", "float", -1.0), p.one("zmax", "float", 1.0), p.one("phimax", "float", 360.0)
+            if phimax >= 360 and abs(np.linalg.det(m[:3, :3])) > 0 and _is_similarity(m):
+                return {"type": "cylinder", "radius": r, "p0": [0.0, 0.0, zmin], "p1": [0.0, 0.0, zmax],
+                        "to_world": _mi_transform(m), "flip_normals": rev}
+            return self.mesh(p, *_cylinder_mesh(r, zmin, zmax, phimax))
+        if t == "trianglemesh":
+            pos = p.array("P", "point3", 3)
+            if pos is None:
+                raise p.error(None, "trianglemesh needs \"point3 P\"")
+            idx = p.ints("indices")
+            if idx is None:
+                if len(pos) != 3:
+                    raise p.error(None, "\"integer indices\" is required unless the mesh is one triangle")
+                idx = [0, 1, 2]
+            if len(idx) % 3:
+                raise p.error("indices", f"needs a multiple of 3 values, got {len(idx)}")
+            n = p.array("N", "normal", 3)
+            uv = p.array("uv", "point2", 2)
+            for k in ("S", "faceIndices"):
+                if p.has(k):
+                    p._get(k, (p.p[k].type,))
+                    self.note(p.p[k].where, f"Shape: {k!r} of trianglemesh ignored")
+            return self.mesh(p, pos, idx, n, uv)
+        if t == "plymesh":
+            fname = p.string("filename")
+            if fname is None:
+                raise p.error(None, "plymesh needs \"string filename\"")
+            full = resolve(fname, self.base)
+            if not os.path.exists(full):
+                return self.missing(p.d.where, p.d.name, fname, full)
+            for k in ("displacement", "edgelength"):
+                if p.has(k):
+                    p.p[k].used = True
+                    self.unsupported(p.d, f"plymesh {k!r} (displacement mapping)")
+            pos, f, n, uv = _read_ply(full, p.d.where)
+            return self.mesh(p, pos, f, n, uv)
+        if t == "bilinearmesh":
+            pos = p.array("P", "point3", 3)
+            idx = p.ints("indices")
+            if pos is None:
+                raise p.error(None, "bilinearmesh needs \"point3 P\"")
+            if idx is None:
+                if len(pos) != 4:
+                    raise p.error(None, "\"integer indices\" is required unless the mesh is one patch")
+                idx = [0, 1, 2, 3]
+            if len(idx) % 4:
+                raise p.error("indices", f"needs a multiple of 4 values, got {len(idx)}")
+            q = np.asarray(idx).reshape(-1, 4)
+            # pbrt-v4's patch p00 p10 p01 p11 -> two triangles (planar patches are exact).
+            tri = np.concatenate([q[:, [0, 1, 3]], q[:, [0, 3, 2]]], axis=0)
+            return self.mesh(p, pos, tri, p.array("N", "normal", 3), p.array("uv", "point2", 2))
+        if t == "loopsubdiv":
+            from trimesh.remesh import subdivide_loop
+            pos = p.array("P", "point3", 3)
+            idx = p.ints("indices")
+            if pos is None or idx is None:
+                raise p.error(None, "loopsubdiv needs \"point3 P\" and \"integer indices\"")
+            levels = p.one("levels", "integer", 3)
+            v, f = subdivide_loop(pos, np.asarray(idx).reshape(-1, 3), iterations=max(0, levels))
+            self.note(p.d.where, "Shape: loopsubdiv is subdivided without pbrt-v4's push to the limit surface")
+            return self.mesh(p, v, f)
+        if t == "curve":
+            return self.curve(p)
+        if t in ("cone", "paraboloid", "hyperboloid"):
+            raise p.error(None, f"{t!r} is a pbrt-v3 shape that pbrt-v4 removed")
+        raise p.error(None, f"unknown shape {t!r} (pbrt-v4's: sphere, disk, cylinder, trianglemesh, plymesh, "
+                             "bilinearmesh, loopsubdiv, curve)")
+
+    def curve(self, p: _Params) -> dict:
+        """pbrt-v4 curves as Mitsuba's ``bsplinecurve`` (round tubes; cubic Bezier control
+        points are converted to the B-spline basis)."""
+        pos = p.array("P", "point3", 3)
+        if pos is None:
+            raise p.error(None, "curve needs \"point3 P\"")
+        basis = p.string("basis", "bezier")
+        degree = p.one("degree", "integer", 3)
+        ctype = p.string("type", "flat")
+        if ctype != "cylinder":
+            self.unsupported(p.d, f"curve type {ctype!r}: a round tube (Mitsuba's bsplinecurve) is used")
+        if degree != 3:
+            self.unsupported(p.d, f"curve degree {degree} (only cubic curves)")
+        w = p.one("width", "float", 1.0)
+        w0, w1 = p.one("width0", "float", w), p.one("width1", "float", w)
+        for k in ("N", "splitdepth"):
+            if p.has(k):
+                p.p[k].used = True
+        m = self.ctm()
+        pw = pos @ m[:3, :3].T + m[:3, 3]
+        scale = _area_scale(m) ** 0.5
+        if basis == "bezier":
+            if (len(pw) - 1) % 3:
+                raise p.error("P", f"a cubic Bezier curve needs 3 n + 1 control points, got {len(pw)}")
+            segs = [pw[i:i + 4] for i in range(0, len(pw) - 1, 3)]
+            # B-spline control points of each Bezier segment: B = M_bspline^-1 M_bezier P.
+            conv = np.array([[6, -7, 2, 0], [0, 2, -1, 0], [0, -1, 2, 0], [0, 2, -7, 6]], dtype=np.float64)
+            ctrl = [conv @ s for s in segs]
+        elif basis == "bspline":
+            if len(pw) < 4:
+                raise p.error("P", f"a cubic B-spline needs at least 4 control points, got {len(pw)}")
+            ctrl = [pw]
+        else:
+            raise p.error("basis", f"expected 'bezier' or 'bspline', got {basis!r}")
+        lines = []
+        for c in ctrl:
+            t = np.linspace(0, 1, len(c))
+            r = 0.5 * ((1 - t) * w0 + t * w1) * scale
+            lines += [f"{x:.9g} {y:.9g} {z:.9g} {rr:.9g}" for (x, y, z), rr in zip(c, r)]
+            lines.append("")
+        os.makedirs(self.mesh_dir, exist_ok=True)
+        text = "\n".join(lines)
+        fname = os.path.join(self.mesh_dir, hashlib.sha1(text.encode()).hexdigest()[:20] + ".txt")
+        if not os.path.exists(fname):
+            with open(fname, "w") as f:
+                f.write(text)
+        return {"type": "bsplinecurve", "filename": fname}
+
+    # -- values ------------------------------------------------------------------------------------
+    def spectrum_value(self, q: Param, p: _Params, kind: str):
+        """A parameter's value as pbr takes it (see :meth:`_Params.value`)."""
+        where = q.where
+        if q.type == "texture":
+            name = q.values[0]
+            order = ("float", "spectrum") if kind == "float" else ("spectrum", "float")
+            for k in order:
+                if name in self.textures[k]:
+                    return self.textures[k][name]
+            raise XMLError(f"{where}: {p.d.name}: parameter {q.name!r}: unknown texture {name!r}")
+        if q.type in ("float", "integer"):
+            if len(q.values) != 1:
+                raise XMLError(f"{where}: {p.d.name}: parameter {q.name!r}: expected one value, got {len(q.values)}")
+            return float(q.values[0])
+        if q.type == "rgb":
+            if len(q.values) != 3:
+                raise XMLError(f"{where}: {p.d.name}: parameter {q.name!r}: expected one RGB triple")
+            return {"type": "rgb", "value": [float(v) for v in q.values]}
+        if q.type == "blackbody":
+            t = float(q.values[0])
+            if t <= 0:
+                raise XMLError(f"{where}: {p.d.name}: parameter {q.name!r}: temperature must be positive, got {t}")
+            bb = {"type": "blackbody", "temperature": t}
+            if kind == "illuminant":
+                return bb
+            # pbrt-v4's BlackbodySpectrum is normalised to a peak of 1 (tabulated here, so
+            # that it can be an albedo).
+            lam = np.arange(LAMBDA_MIN, LAMBDA_MAX + 1.0, 5.0)
+            vals = blackbody(lam, t) / _blackbody_peak(t)
+            return {"type": "spectrum", "value": [(float(a), float(b)) for a, b in zip(lam, vals)]}
+        if q.type == "spectrum":
+            v = q.values[0]
+            if isinstance(v, str):
+                return self.named_spectrum(v, q, p, kind)
+            pairs = np.asarray(q.values, dtype=np.float64).reshape(-1, 2)
+            return {"type": "spectrum", "value": [(float(a), float(b)) for a, b in pairs]}
+        raise XMLError(f"{where}: {p.d.name}: parameter {q.name!r}: a {q.type} cannot be a spectrum or float")
+
+    def named_spectrum(self, name: str, q: Param, p: _Params, kind: str):
+        lname = name.lower()
+        if lname in SELLMEIER:
+            return name          # pbr's dielectrics take Sellmeier glass names
+        if lname == "glass-f11":
+            return "glass-SF11"  # pbrt-v4's "glass-F11" is Schott SF11
+        if lname in _GLASS_ND:
+            self.unsupported(p.d, f"dispersive glass {name!r} (pbr has Sellmeier data for "
+                                  f"{', '.join(sorted(SELLMEIER))}): its IOR at 587.6 nm, {_GLASS_ND[lname]}, is used")
+            return _GLASS_ND[lname]
+        if lname.startswith("metal-"):
+            return name          # conductors take "metal-Cu-eta" (handled by the material)
+        if lname == "stdillum-d65":
+            return {"type": "rgb", "value": [1.0, 1.0, 1.0]}    # pbr's RGB illuminant: D65 of unit luminance
+        full = resolve(name, self.base)
+        if os.path.exists(full):
+            pairs = _read_spd(full, q.where)
+            return {"type": "spectrum", "value": [(float(a), float(b)) for a, b in pairs]}
+        if self.skip_missing and "." in os.path.basename(name):
+            self.missing(q.where, p.d.name, name, full)
+            return 1.0
+        raise XMLError(f"{q.where}: {p.d.name}: parameter {q.name!r}: unknown named spectrum or missing file {name!r} "
+                       f"(pbr knows {', '.join(sorted(SELLMEIER))}, metal-<X>-eta/k, stdillum-D65)")
+
+    def emission(self, p: _Params, name: str, default_rgb=(1.0, 1.0, 1.0)):
+        """(spectrum value, luminance) of an emission parameter: pbrt-v4 divides the
+        light's scale by this luminance (``SpectrumToPhotometric``)."""
+        v = p.value(name, None, kind="illuminant")
+        if v is None:
+            return {"type": "rgb", "value": list(default_rgb)}, 1.0
+        if isinstance(v, float):
+            return v, (1.0 if v == 0 else v)   # a constant spectrum has luminance v
+        if v.get("type") == "rgb":
+            return v, 1.0                    # pbrt-v4: only the illuminant counts
+        if v.get("type") == "blackbody":
+            return v, _blackbody_luminance(v["temperature"])
+        if v.get("type") == "spectrum":
+            pr = np.asarray(v["value"], dtype=np.float64)
+            return v, luminance_of(pr[:, 1], pr[:, 0])
+        raise p.error(name, "a light's spectrum cannot be a texture")
+
+    # -- textures --------------------------------------------------------------------------------------
+    def _uv_transform(self, p: _Params, flip_v: bool):
+        mapping = p.string("mapping", "uv")
+        if mapping != "uv":
+            self.unsupported(p.d, f"texture mapping {mapping!r} (only 'uv')")
+        su, sv = p.one("uscale", "float", 1.0), p.one("vscale", "float", 1.0)
+        du, dv = p.one("udelta", "float", 0.0), p.one("vdelta", "float", 0.0)
+        m = np.array([[su, 0, du], [0, sv, dv], [0, 0, 1]], dtype=np.float64)
+        if flip_v:
+            m = np.array([[1, 0, 0], [0, -1, 1], [0, 0, 1]]) @ m
+        return m
+
+    def texture(self, p: _Params, cls: str, kind: str):
+        if cls == "constant":
+            return p.value("value", 1.0)
+        if cls == "scale":
+            return {"type": "scale", "tex": p.value("tex", 1.0), "scale": p.value("scale", 1.0, kind="float")}
+        if cls == "mix":
+            return {"type": "mix", "tex1": p.value("tex1", 0.0), "tex2": p.value("tex2", 1.0),
+                    "amount": p.value("amount", 0.5, kind="float")}
+        if cls == "imagemap" and "imagemap" not in TEXTURE_TYPES:
+            fname = p.string("filename")
+            if fname is None:
+                raise p.error(None, "imagemap needs \"string filename\"")
+            full = resolve(fname, self.base)
+            if not os.path.exists(full):
+                self.missing(p.d.where, p.d.name, fname, full)
+                for q in p.d.params:
+                    q.used = True
+                return 0.5
+            wrap = p.string("wrap", "repeat")
+            wraps = {"repeat": "repeat", "clamp": "clamp", "black": "clamp", "octahedralsphere": "repeat"}
+            if wrap not in wraps:
+                raise p.error("wrap", f"expected repeat, black, clamp or octahedralsphere, got {wrap!r}")
+            if wrap in ("black", "octahedralsphere"):
+                self.unsupported(p.d, f"imagemap wrap {wrap!r}: {wraps[wrap]!r} is used")
+            filt = p.string("filter", "bilinear")
+            if filt not in ("bilinear", "point"):
+                self.note(p.d.where, f"Texture: imagemap filter {filt!r} is bilinear in pbr (no MIP-mapping yet)")
+            enc = p.string("encoding", "sRGB")
+            if enc not in ("sRGB", "linear"):
+                self.unsupported(p.d, f"imagemap encoding {enc!r} (sRGB or linear)")
+            raw = enc == "linear"
+            t = {"type": "bitmap", "filename": full, "wrap_mode": wraps[wrap],
+                 "filter_type": "nearest" if filt == "point" else "bilinear",
+                 "to_uv": _mi_transform(_affine3_to4(self._uv_transform(p, flip_v=True)))}
+            if raw:
+                t["raw"] = True
+            sc, inv = p.one("scale", "float", 1.0), p.bool("invert", False)
+            if sc != 1.0:
+                t = {"type": "scale", "tex": t, "scale": sc}
+            if inv:      # pbrt-v4: 1 - scale * texel, i.e. mix(1, 0) with the texel as amount
+                t = {"type": "mix", "tex1": 1.0, "tex2": 0.0, "amount": t}
+            return t
+        if cls == "checkerboard" and p.one("dimension", "integer", 2) == 2:
+            # pbrt's squares have size 1 in (s, t); Mitsuba's checkerboard has period 1.
+            m = np.array([[0.5, 0, 0], [0, 0.5, 0], [0, 0, 1]]) @ self._uv_transform(p, flip_v=False)
+            return {"type": "checkerboard", "color0": p.value("tex1", 1.0), "color1": p.value("tex2", 0.0),
+                    "to_uv": _mi_transform(_affine3_to4(m))}
+        if cls in TEXTURE_TYPES or cls in ("fbm", "wrinkled", "windy", "marble", "dots", "checkerboard",
+                                           "imagemap", "bilerp", "directionmix", "ptex"):
+            if cls not in TEXTURE_TYPES:
+                self.unsupported(p.d, f"texture {cls!r} (pbr has no such texture yet): a constant 0.5 is used")
+                return 0.5
+            return self.passthrough(p, cls)
+        raise p.error(None, f"unknown texture {cls!r}")
+
+    def passthrough(self, p: _Params, t: str) -> dict:
+        """A plugin registered in pbr under pbrt-v4's name: pbrt-v4's parameter names pass
+        through unchanged (values converted)."""
+        out = {"type": t}
+        for q in p.d.params:
+            q.used = True
+            if q.type in ("rgb", "spectrum", "blackbody", "texture"):
+                out[q.name] = self.spectrum_value(q, p, "albedo")
+            elif q.type == "string" and q.name == "filename":
+                out[q.name] = resolve(q.values[0], self.base)
+            elif len(q.values) == 1:
+                out[q.name] = q.values[0] if q.type != "float" else float(q.values[0])
+            else:
+                out[q.name] = list(q.values)
+        return out
+
+    # -- materials ----------------------------------------------------------------------------------------
+    def _roughness(self, p: _Params, prefix: str = ""):
+        """(alpha_u, alpha_v) from pbrt-v4's roughness parameters (``remaproughness``:
+        alpha = sqrt(roughness), TrowbridgeReitzDistribution::RoughnessToAlpha)."""
+        r = p.value(prefix + "roughness", 0.0, kind="float")
+        ru, rv = p.value(prefix + "uroughness", r, kind="float"), p.value(prefix + "vroughness", r, kind="float")
+        remap = p.bool("remaproughness", True)
+        out = []
+        for v in (ru, rv):
+            if isinstance(v, float):
+                out.append(math.sqrt(max(v, 0.0)) if remap else v)
+            else:
+                if remap:
+                    self.unsupported(p.d, "a roughness texture with remaproughness: the texture, not remapped, is used")
+                out.append(v)
+        return out
+
+    def material(self, p: _Params, t: str) -> dict:
+        b = self._material(p, t)
+        for k in ("displacement",):
+            if p.has(k):
+                p.p[k].used = True
+                self.unsupported(p.d, "material 'displacement' (bump mapping)")
+        nm = p.string("normalmap")
+        full = resolve(nm, self.base) if nm else None
+        if nm and not os.path.exists(full):
+            self.missing(p.p["normalmap"].where, p.d.name, nm, full)
+        elif nm:
+            b = {"type": "normalmap", "normalmap": {"type": "bitmap", "filename": full, "raw": True,
+                                                    "to_uv": _mi_transform(_affine3_to4(np.array(
+                                                        [[1, 0, 0], [0, -1, 1], [0, 0, 1]])))}, "bsdf": b}
+        if p.has("type"):
+            p.p["type"].used = True
+        self.warn_unused(p, f"material {t!r}")
+        return b
+
+    def _material(self, p: _Params, t: str) -> dict:
+        two = lambda b: {"type": "twosided", "bsdf": b}    # pbrt-v4's reflective BSDFs are two-sided
+        if t == "diffuse":
+            return two({"type": "diffuse", "reflectance": p.value("reflectance", 0.5)})
+        if t in ("conductor",):
+            au, av = self._roughness(p)
+            b = {}
+            if p.has("reflectance"):
+                self.unsupported(p.d, "conductor 'reflectance' (pbrt-v4's artist Fresnel): "
+                                      "a mirror times the reflectance is used")
+                b["material"] = "none"
+                b["specular_reflectance"] = p.value("reflectance")
+            else:
+                eta = p.value("eta", "metal-Cu-eta", kind="unbounded")
+                k = p.value("k", "metal-Cu-k", kind="unbounded")
+                if isinstance(eta, str) and isinstance(k, str):
+                    me, mk = _metal_name(eta, "eta"), _metal_name(k, "k")
+                    if me is None or mk is None or me != mk:
+                        raise p.error("eta", f"eta {eta!r} and k {k!r} must name the same metal "
+                                             "(metal-<X>-eta, metal-<X>-k)")
+                    b["material"] = me
+                else:
+                    for nm, v in (("eta", eta), ("k", k)):
+                        if isinstance(v, str):
+                            raise p.error(nm, f"a named metal ({v!r}) needs the other of eta/k named too")
+                    b["eta"], b["k"] = eta, k
+            if isinstance(au, float) and isinstance(av, float) and max(au, av) < 1e-3:
+                return two({"type": "conductor", **b})
+            b.update({"type": "roughconductor", "distribution": "ggx"})
+            b.update({"alpha": au} if au is av or (isinstance(au, float) and au == av) else {"alpha_u": au, "alpha_v": av})
+            return two(b)
+        if t in ("dielectric", "thindielectric"):
+            eta = p.value("eta", 1.5, kind="unbounded")
+            if isinstance(eta, dict) and eta.get("type") == "rgb":
+                raise p.error("eta", "an RGB IOR is not physical; give a float or a spectrum")
+            if t == "thindielectric":
+                return {"type": "thindielectric", "int_ior": eta, "ext_ior": 1.0}
+            au, av = self._roughness(p)
+            if isinstance(eta, float) and eta == 1.0:
+                return {"type": "null"}       # pbrt-v4: an index-matched interface passes light unchanged
+            if isinstance(au, float) and isinstance(av, float) and max(au, av) < 1e-3:
+                return {"type": "dielectric", "int_ior": eta, "ext_ior": 1.0}
+            b = {"type": "roughdielectric", "int_ior": eta, "ext_ior": 1.0, "distribution": "ggx"}
+            b.update({"alpha": au} if isinstance(au, float) and au == av else {"alpha_u": au, "alpha_v": av})
+            return b
+        if t == "interface":
+            return {"type": "null"}
+        if t == "mix":
+            q = p._get("materials", ("string",))
+            if q is None or len(q.values) != 2:
+                raise p.error("materials", "mix needs \"string materials\" with two material names")
+            refs = []
+            for n in q.values:
+                if n not in self.named_materials:
+                    raise p.error("materials", f"unknown material {n!r}")
+                refs.append({"type": "ref", "id": self.named_materials[n]})
+            return {"type": "mix", "amount": p.value("amount", 0.5, kind="float"), "bsdf_0": refs[0], "bsdf_1": refs[1]}
+        if t == "hair":
+            b = {"type": "hair"}
+            if p.has("sigma_a"):
+                b["sigma_a"] = p.value("sigma_a", kind="unbounded")
+            elif p.has("reflectance"):
+                b["reflectance"] = p.value("reflectance")
+            else:
+                # pbrt-v4: eumelanin 1.3 when no colour is given, pheomelanin 0 (Mitsuba: 0.2).
+                b["eumelanin"] = p.value("eumelanin", 1.3, kind="float")
+                b["pheomelanin"] = p.value("pheomelanin", 0.0, kind="float")
+            b["int_ior"] = p.one("eta", "float", 1.55)
+            b["longitudinal_roughness"] = p.value("beta_m", 0.3, kind="float")
+            b["azimuthal_roughness"] = p.value("beta_n", 0.3, kind="float")
+            b["scale_tilt"] = p.value("alpha", 2.0, kind="float")
+            return b
+        if t == "measured":
+            fname = p.string("filename")
+            if fname is None:
+                raise p.error(None, "measured needs \"string filename\"")
+            full = resolve(fname, self.base)
+            if not os.path.exists(full):
+                self.missing(p.d.where, p.d.name, fname, full)
+                return {"type": "twosided", "bsdf": {"type": "diffuse"}}
+            return {"type": "measured", "filename": full}
+        if t in ("coateddiffuse", "coatedconductor", "diffusetransmission"):
+            b = {"type": t}
+            for q in p.d.params:
+                if q.name in ("type", "displacement", "normalmap"):
+                    continue
+                q.used = True
+                if q.name == "remaproughness":
+                    b[q.name] = q.values[0]
+                elif q.name in ("maxdepth", "nsamples"):
+                    b[q.name] = int(q.values[0])
+                elif q.name == "eta" and q.type in ("float", "integer"):
+                    b[q.name] = float(q.values[0])
+                else:
+                    kind = "unbounded" if q.name.endswith((".eta", ".k", "eta")) else (
+                        "float" if "roughness" in q.name or q.name in ("thickness", "g", "scale") else "albedo")
+                    b[q.name] = self.spectrum_value(q, p, kind)
+            if t == "diffusetransmission":
+                return b
+            return two(b)
+        if t == "subsurface":
+            self.unsupported(p.d, "material 'subsurface' (no BSSRDF in pbr): a coated diffuse surface is used")
+            for q in p.d.params:
+                q.used = True
+            refl = p.value("reflectance", 0.5) if p.has("reflectance") else 0.5
+            return two({"type": "coateddiffuse", "reflectance": refl,
+                        "eta": p.one("eta", "float", 1.33)})
+        if t in ("", "none"):
+            return {"type": "null"}
+        raise p.error(None, f"unknown material {t!r} (pbrt-v4's: diffuse, conductor, dielectric, thindielectric, "
+                             "coateddiffuse, coatedconductor, diffusetransmission, hair, measured, mix, interface, "
+                             "subsurface)")
+
+    # -- media ------------------------------------------------------------------------------------------------
+    def medium(self, p: _Params) -> dict:
+        t = p.string("type")
+        if t is None:
+            raise p.error(None, "MakeNamedMedium needs \"string type\"")
+        if p.has("preset"):
+            self.unsupported(p.d, f"medium preset {p.string('preset')!r} (pbrt-v4's measured scattering tables)")
+        common = {"sigma_a": p.value("sigma_a", 1.0, kind="unbounded"),
+                  "sigma_s": p.value("sigma_s", 1.0, kind="unbounded"),
+                  "scale": p.one("scale", "float", 1.0), "g": p.one("g", "float", 0.0)}
+        le = p.value("Le", None, kind="illuminant")
+        if le is not None:
+            common["Le"] = le
+            common["Lescale"] = p.one("Lescale", "float", 1.0)
+        if t == "homogeneous":
+            return {"type": "homogeneous", **common}
+        m = self.ctm()
+        p0, p1 = p.vec3("p0", (0, 0, 0)), p.vec3("p1", (1, 1, 1))
+        nx, ny, nz = (p.one(k, "integer", 1) for k in ("nx", "ny", "nz"))
+        if t == "uniformgrid":
+            dens = p.floats("density")
+            if dens is None:
+                if p.has("temperature"):
+                    self.unsupported(p.d, "uniformgrid 'temperature' (blackbody emission grid)")
+                raise p.error(None, "uniformgrid needs \"float density\"")
+            if len(dens) != nx * ny * nz:
+                raise p.error("density", f"has {len(dens)} values, nx*ny*nz = {nx * ny * nz}")
+            return {"type": "uniformgrid", "density": np.asarray(dens, dtype=np.float32).reshape(nz, ny, nx),
+                    "p0": list(p0), "p1": list(p1), "to_world": _mi_transform(m), **common}
+        if t == "rgbgrid":
+            out = {"type": "rgbgrid", "p0": list(p0), "p1": list(p1), "to_world": _mi_transform(m),
+                   "scale": common["scale"], "g": common["g"]}
+            for k in ("sigma_a", "sigma_s", "Le"):
+                q = p._get(k, ("rgb",))
+                if q is None:
+                    continue
+                if len(q.values) != 3 * nx * ny * nz:
+                    raise p.error(k, f"has {len(q.values) // 3} RGB values, nx*ny*nz = {nx * ny * nz}")
+                out[k] = np.asarray(q.values, dtype=np.float32).reshape(nz, ny, nx, 3)
+            if "Le" in out:
+                out["Lescale"] = p.one("Lescale", "float", 1.0)
+            return out
+        if t in ("cloud", "nanovdb"):
+            self.unsupported(p.d, f"medium {t!r} ({'procedural clouds' if t == 'cloud' else 'NanoVDB files'}): "
+                                  "a homogeneous medium of its sigma_a/sigma_s is used")
+            return {"type": "homogeneous", **common}
+        raise p.error("type", f"unknown medium {t!r} (pbrt-v4's: homogeneous, uniformgrid, rgbgrid, cloud, nanovdb)")
+
+    # -- lights ----------------------------------------------------------------------------------------------------
+    def _light_scale(self, p, name, value, lum):
+        """``{name: value, ...}`` with pbrt-v4's scale, divided by the spectrum's luminance
+        unless ``power`` (which pbr's lights normalise themselves) is given. A factor on an
+        RGB value is folded into it (so that Mitsuba reads the dict too)."""
+        sc = p.one("scale", "float", 1.0)
+        power = p.one("power", "float", -1.0)
+        out = {name: value}
+        if power > 0:
+            out["power"] = power
+        else:
+            if lum <= 0:
+                raise p.error(None, "the light's spectrum is black (zero luminance)")
+            sc = sc / lum
+        if isinstance(value, dict) and value.get("type") == "rgb":
+            out[name] = {"type": "rgb", "value": [v * sc for v in value["value"]]}
+        elif isinstance(value, float):
+            out[name] = value * sc
+        elif sc != 1.0:
+            out["scale"] = sc
+        return out
+
+    def light(self, p: _Params, t: str) -> dict | None:
+        m = self.ctm()
+        if t == "point":
+            i, lum = self.emission(p, "I")
+            frm = p.vec3("from", (0, 0, 0))
+            return {"type": "point", "to_world": _mi_transform(m @ _translate(*frm)),
+                    **self._light_scale(p, "intensity", i, lum)}
+        if t == "spot":
+            i, lum = self.emission(p, "I")
+            frm, to = p.vec3("from", (0, 0, 0)), p.vec3("to", (0, 0, 1))
+            cone, delta = p.one("coneangle", "float", 30.0), p.one("conedeltaangle", "float", 5.0)
+            self.note(p.d.where, "LightSource: spot falls off linearly in angle between the cone angles "
+                                 "(Mitsuba's), pbrt-v4 uses a smoothstep in cos")
+            frame = np.linalg.inv(_look_at(frm, to, _any_up(to - frm)))
+            return {"type": "spot", "cutoff_angle": cone, "beam_width": max(cone - delta, 0.0),
+                    "to_world": _mi_transform(m @ frame), **self._light_scale(p, "intensity", i, lum)}
+        if t == "distant":
+            l, lum = self.emission(p, "L")
+            w = m[:3, :3] @ (p.vec3("to", (0, 0, 1)) - p.vec3("from", (0, 0, 0)))
+            if not np.linalg.norm(w) > 0:
+                raise p.error("to", "'from' and 'to' coincide: the light has no direction")
+            direction = [float(x) for x in w / np.linalg.norm(w)]
+            ill = p.one("illuminance", "float", -1.0)
+            if ill > 0:
+                return {"type": "distant", "L": l, "direction": direction, "scale": p.one("scale", "float", 1.0),
+                        "illuminance": ill}
+            # pbrt's L times scale is the irradiance on a plane facing the light: Mitsuba's
+            # directional light.
+            out = self._light_scale(p, "irradiance", l, lum)
+            return {"type": "directional", "direction": direction, **out}
+        if t == "goniometric":
+            i, lum = self.emission(p, "I")
+            fname = p.string("filename")
+            if fname is None:
+                raise p.error(None, "goniometric needs \"string filename\"")
+            return {"type": "goniometric", "filename": resolve(fname, self.base),
+                    "to_world": _mi_transform(m), **self._light_scale(p, "I", i, lum)}
+        if t == "projection":
+            fname = p.string("filename")
+            if fname is None:
+                raise p.error(None, "projection needs \"string filename\"")
+            out = {"type": "projection", "filename": resolve(fname, self.base), "fov": p.one("fov", "float", 90.0),
+                   "to_world": _mi_transform(m), "scale": p.one("scale", "float", 1.0)}
+            if p.one("power", "float", -1.0) > 0:
+                out["power"] = p.one("power", "float")
+            return out
+        if t == "infinite":
+            fname = p.string("filename")
+            sc = p.one("scale", "float", 1.0)
+            if p.has("portal"):
+                p._get("portal", ("point3",))
+                self.unsupported(p.d, "infinite light 'portal' (pbr's portalenvmap takes lat-long maps)")
+            if fname is not None:
+                return self.image_infinite(p, resolve(fname, self.base), sc, m)
+            l, lum = self.emission(p, "L")
+            ill = p.one("illuminance", "float", -1.0)
+            if ill > 0:
+                sc *= ill / math.pi      # pbrt-v4: the upper hemisphere's illuminance of a constant L is pi L
+            if isinstance(l, dict) and l.get("type") == "rgb":
+                return {"type": "constant", "radiance": {"type": "rgb", "value": [v * sc / lum for v in l["value"]]}}
+            return {"type": "constant", "radiance": {"type": "scale", "tex": l, "scale": sc / lum}}
+        raise p.error(None, f"unknown light {t!r} (pbrt-v4's: point, spot, distant, goniometric, projection, infinite)")
+
+    def image_infinite(self, p, fname, sc, m):
+        """pbrt-v4's image infinite light: an equal-area octahedral square image, resampled
+        to Mitsuba's latitude-longitude ``envmap``."""
+        import mitsuba as mi
+        if not os.path.exists(fname):
+            self.missing(p.d.where, p.d.name, os.path.basename(fname), fname)
+            return {"type": "constant", "radiance": sc}
+        try:
+            bmp = mi.Bitmap(fname).convert(mi.Bitmap.PixelFormat.RGB, mi.Struct.Type.Float32, srgb_gamma=False)
+        except Exception as e:
+            raise p.error("filename", f"cannot read image {fname!r}: {e}") from None
+        img = np.asarray(bmp, dtype=np.float32)
+        if img.ndim == 2:
+            img = img[..., None].repeat(3, axis=2)
+        img = img[..., :3]
+        if img.shape[0] != img.shape[1]:
+            raise p.error("filename", f"pbrt-v4's infinite light takes a square equal-area image, got {img.shape[1]}x{img.shape[0]}")
+        if p.one("illuminance", "float", -1.0) > 0:
+            self.unsupported(p.d, "infinite light 'illuminance' with an image")
+        env = equal_area_to_latlong(img)
+        # pbrt's light space has +z up; Mitsuba's envmap has +y up: rotate -90 degrees about x.
+        frame = np.array([[1, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]], dtype=np.float64)
+        return {"type": "envmap", "data": env, "scale": sc, "to_world": _mi_transform(m @ frame)}
+
+    def area_light(self, p: _Params, shape: dict, sd: Directive) -> dict:
+        l, lum = self.emission(p, "L")
+        if p.has("filename"):
+            self.unsupported(p.d, "area light 'filename' (an image on the emitter): L is used")
+            p.p["filename"].used = True
+        if p.bool("twosided", False):
+            self.unsupported(p.d, "two-sided area lights (pbr's area emitters emit from the front only)")
+        sc = p.one("scale", "float", 1.0) / lum
+        power = p.one("power", "float", -1.0)
+        if power > 0:
+            # pbrt-v4 makes one light per shape: per quadric, per triangle of a mesh (each
+            # triangle gets the whole 'power').
+            if "_light_area" in shape:
+                area = shape["_light_area"]
+            elif "_tri_areas" in shape:
+                tri = shape["_tri_areas"]
+                area = float(tri.mean())
+                if tri.max() > 1.001 * tri.min():
+                    self.unsupported(sd, "'power' on a mesh of unequal triangles (pbrt-v4 gives each triangle "
+                                         "the power, so their radiances differ): the mean triangle's radiance "
+                                         "(the same total power) is used")
+            else:
+                raise p.error("power", f"the area of this {shape['type']!r} shape is unknown")
+            if not area > 0:
+                raise p.error("power", "the emitting shape has no area")
+            k_e = math.pi * area * (2 if p.bool("twosided", False) else 1)
+            sc *= power / k_e
+        if isinstance(l, float):
+            return {"type": "area", "radiance": l * sc}
+        if l.get("type") == "rgb":
+            return {"type": "area", "radiance": {"type": "rgb", "value": [v * sc for v in l["value"]]}}
+        return {"type": "area", "radiance": {"type": "scale", "tex": l, "scale": sc}}
+
+    # -- camera, film, sampler, integrator ------------------------------------------------------------------------
+    def finish(self) -> None:
+        for v in list(self.out.values()):
+            _strip_private(v)
+        sensor, integrator = self.sensor(), self.make_integrator()
+        if not any(isinstance(v, dict) and v.get("type") in ("ply", "sphere", "disk", "cylinder", "bsplinecurve",
+                                                            "instance") for v in self.out.values()):
+            raise XMLError(f"{self.path}:0: the scene has no shapes")
+        self.out["sensor"], self.out["integrator"] = sensor, integrator
+        self.lines["scene.sensor"] = self.camera.where if self.camera else f"{self.path}:1"
+        self.lines["scene.integrator"] = self.integrator.where if self.integrator else f"{self.path}:1"
+        # Keep the sensor and the integrator first, as Mitsuba scenes usually list them.
+        self.out = {"type": "scene", "integrator": self.out.pop("integrator"), "sensor": self.out.pop("sensor"),
+                    **{k: v for k, v in self.out.items() if k != "type"}}
+
+    def film_size(self):
+        f = _Params(self.film, self) if self.film else None
+        w = f.one("xresolution", "integer", 1280) if f else 1280
+        h = f.one("yresolution", "integer", 720) if f else 720
+        o = self.overrides
+        if "res" in o or "width" in o:
+            nw = int(o.get("res", o.get("width")))
+            h = int(o["height"]) if "height" in o else max(1, round(nw * h / w))
+            w = nw
+        elif "height" in o:
+            nh = int(o["height"])
+            w, h = max(1, round(nh * w / h)), nh
+        return f, w, h
+
+    def make_film(self) -> dict:
+        f, w, h = self.film_size()
+        t = self.film.args[0] if self.film else "rgb"
+        if t not in ("rgb", "gbuffer", "spectral"):
+            raise XMLError(f"{self.film.where}: Film: unknown film {t!r} (pbrt-v4's: rgb, gbuffer, spectral)")
+        if t in FILMS:
+            film = self.passthrough(f, t) if f else {"type": t}
+            film["xresolution"], film["yresolution"] = w, h
+            film.pop("filename", None)
+        else:
+            film = {"type": "hdrfilm", "width": w, "height": h, "pixel_format": "rgb"}
+            if t != "rgb" and self.film is not None:
+                self.unsupported(self.film, f"film {t!r}: an RGB hdrfilm is used")
+            if f is not None:
+                cw = f.floats("cropwindow")
+                if cw is not None:
+                    if len(cw) != 4:
+                        raise f.error("cropwindow", "expected 4 values: x0 x1 y0 y1")
+                    x0, x1 = math.ceil(w * cw[0]), math.ceil(w * cw[1])
+                    y0, y1 = math.ceil(h * cw[2]), math.ceil(h * cw[3])
+                    film.update(crop_offset_x=x0, crop_offset_y=y0, crop_width=max(1, x1 - x0),
+                                crop_height=max(1, y1 - y0))
+                pb = f.ints("pixelbounds")
+                if pb is not None:
+                    film.update(crop_offset_x=pb[0], crop_offset_y=pb[2], crop_width=pb[1] - pb[0],
+                                crop_height=pb[3] - pb[2])
+                iso, et = f.one("iso", "float", 100.0), f.one("exposuretime", "float", 1.0)
+                sensor, wb = f.string("sensor", "cie1931"), f.one("whitebalance", "float", 0.0)
+                if sensor != "cie1931" or wb != 0:
+                    self.unsupported(self.film, f"film sensor {sensor!r} with whitebalance {wb} (pbr's hdrfilm "
+                                                "is pbrt-v4's cie1931 sensor without white balancing)")
+                if iso * et != 100.0:
+                    # pbrt-v4's imaging ratio for the cie1931 sensor: a factor on the image.
+                    self.note(self.film.where, f"Film: iso {iso} and exposuretime {et}: pbrt-v4's image is "
+                                               f"pbr's times {iso * et / 100:g}")
+                for k in ("filename", "maxcomponentvalue", "diagonal", "savefp16", "writefp16"):
+                    if f.has(k):
+                        f.p[k].used = True
+                self.warn_unused(f, f"film {t!r}")
+        film["rfilter"] = self.make_filter()
+        return film
+
+    def make_filter(self) -> dict:
+        if self.filter is None:
+            t, f = "gaussian", None
+        else:
+            t, f = self.filter.args[0], _Params(self.filter, self)
+        if t in FILTERS and t not in ("gaussian", "box"):
+            return self.passthrough(f, t) if f else {"type": t}
+        if t == "box":
+            r = f.floats("xradius", [0.5])[0] if f else 0.5
+            if f and (r != 0.5 or f.floats("yradius", [0.5])[0] != 0.5):
+                self.unsupported(self.filter, "a box filter wider than one pixel")
+            return {"type": "box"}
+        if t == "gaussian":
+            sigma = f.one("sigma", "float", 0.5) if f else 0.5
+            r = f.one("xradius", "float", 1.5) if f else 1.5
+            if f and f.has("yradius"):
+                f.p["yradius"].used = True
+            if r != 4 * sigma and self.filter is not None:
+                self.note(self.filter.where, f"PixelFilter: gaussian radius {r} is 4 sigma ({4 * sigma}) in pbr")
+            return {"type": "gaussian", "stddev": sigma}
+        if t == "triangle":
+            r = f.one("xradius", "float", 2.0) if f else 2.0
+            return {"type": "tent", "radius": r}
+        if t in ("mitchell", "lanczos", "sinc"):
+            self.unsupported(self.filter, f"pixel filter {t!r}: a Gaussian is used")
+            return {"type": "gaussian", "stddev": 0.5}
+        raise XMLError(f"{self.filter.where}: PixelFilter: unknown filter {t!r}")
+
+    def sensor(self) -> dict:
+        d = self.camera
+        t = d.args[0] if d else "perspective"
+        p = _Params(d, self) if d else None
+        ctm = self.camera_ctm[0] if d else np.eye(4)
+        if d and not np.allclose(self.camera_ctm[0], self.camera_ctm[1]):
+            self.unsupported(d, "a moving camera (ActiveTransform EndTime): the start transform is used")
+        # pbrt's camera space is left-handed (image x to the right): mirror x for Mitsuba's.
+        to_world = np.linalg.inv(ctm) @ _scale(-1, 1, 1)
+        _, w, h = self.film_size()
+        spp = self.sampler_spp()
+        if t in ("perspective", "orthographic"):
+            s = {"type": t, "to_world": _mi_transform(to_world)}
+            if t == "perspective":
+                s.update(fov=p.one("fov", "float", 90.0) if p else 90.0, fov_axis="smaller")
+            else:
+                a = max(w / h, 1.0) if p is None or not p.has("screenwindow") else 1.0
+                s["to_world"] = _mi_transform(to_world @ _scale(a, a, 1))
+            if p:
+                if p.has("screenwindow"):
+                    self.unsupported(d, "'screenwindow'")
+                    p.p["screenwindow"].used = True
+                if p.has("frameaspectratio"):
+                    self.unsupported(d, "'frameaspectratio'")
+                    p.p["frameaspectratio"].used = True
+                lr = p.one("lensradius", "float", 0.0)
+                fd = p.one("focaldistance", "float", 1e6)
+                if lr > 0:
+                    if t == "orthographic":
+                        self.unsupported(d, "a thin lens on the orthographic camera")
+                    else:
+                        s.update(type="thinlens", aperture_radius=lr, focus_distance=fd)
+                so, sc = p.one("shutteropen", "float", 0.0), p.one("shutterclose", "float", 1.0)
+                self.warn_unused(p, f"camera {t!r}")
+        elif t in ("spherical", "realistic"):
+            if t not in SENSORS:
+                self.unsupported(d, f"camera {t!r} (pbr has no such camera yet): a 90 degree perspective is used")
+                s = {"type": "perspective", "to_world": _mi_transform(to_world), "fov": 90.0, "fov_axis": "smaller"}
+            else:
+                s = self.passthrough(p, t)
+                s["to_world"] = _mi_transform(to_world)
+        else:
+            raise XMLError(f"{d.where}: Camera: unknown camera {t!r} (pbrt-v4's: perspective, orthographic, "
+                           "realistic, spherical)")
+        s["film"] = self.make_film()
+        s["sampler"] = {"type": "independent", "sample_count": spp}
+        if self.camera_medium:
+            s["medium"] = {"type": "ref", "id": self.media[self.camera_medium]}
+        return s
+
+    def sampler_spp(self) -> int:
+        spp = 16
+        if self.sampler is not None:
+            p = _Params(self.sampler, self)
+            spp = p.one("pixelsamples", "integer", 16)
+            for q in p.d.params:
+                q.used = True
+            if self.sampler.args[0] not in ("independent",):
+                self.note(self.sampler.where, f"Sampler {self.sampler.args[0]!r}: pbr samples independently "
+                                              "(the image converges to the same value)")
+        return int(self.overrides.get("spp", spp))
+
+    def make_integrator(self) -> dict:
+        d = self.integrator
+        t = d.args[0] if d else "volpath"
+        p = _Params(d, self) if d else None
+        maxdepth = p.one("maxdepth", "integer", 5) if p else 5
+        maxdepth = int(self.overrides.get("maxdepth", maxdepth))
+        names = {"volpath": "volpath", "path": "path", "bdpt": "bdpt", "mlt": "mlt", "sppm": "sppm",
+                 "lightpath": "lightpath", "simplepath": "simplepath", "simplevolpath": "simplevolpath",
+                 "randomwalk": "randomwalk", "ambientocclusion": "ambientocclusion", "aov": "aov"}
+        if t not in names:
+            raise XMLError(f"{d.where}: Integrator: unknown integrator {t!r} (pbrt-v4's: {', '.join(names)})")
+        if names[t] not in INTEGRATORS:
+            raise XMLError(f"{d.where}: Integrator: {t!r} is not available in pbr")
+        out = {"type": names[t]}
+        if t in ("volpath", "path", "simplepath", "simplevolpath", "randomwalk", "lightpath"):
+            out["max_depth"] = maxdepth + 1          # Mitsuba counts the emitter seen directly as depth 1
+        elif t in ("bdpt", "mlt", "sppm"):
+            out["maxdepth"] = maxdepth
+        if p:
+            ls = p.string("lightsampler")
+            if ls is not None and t in ("volpath", "path"):
+                if ls not in ("uniform", "power", "bvh"):
+                    raise p.error("lightsampler", f"expected uniform, power or bvh, got {ls!r}")
+                out["light_sampler"] = ls
+            if p.bool("regularize", False):
+                self.unsupported(d, "'regularize'")
+            for q in p.d.params:
+                if not q.used and t in ("bdpt", "mlt", "sppm", "ambientocclusion"):
+                    q.used = True
+                    out[q.name] = q.values[0] if len(q.values) == 1 else list(q.values)
+            self.warn_unused(p, f"integrator {t!r}")
+        return out
+
+
+# -- helpers ----------------------------------------------------------------------------------------------
+
+def _safe(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "_-" else "_" for c in name)
+
+
+def _strip_private(v):
+    if isinstance(v, dict):
+        for k in [k for k in v if k.startswith("_")]:
+            del v[k]
+        for c in v.values():
+            _strip_private(c)
+
+
+def _metal_name(s: str, comp: str):
+    parts = s.split("-")
+    if len(parts) == 3 and parts[0] == "metal" and parts[2] == comp:
+        return _METALS.get(parts[1])
+    return None
+
+
+def _area_scale(m) -> float:
+    """How a uniformly scaling transform scales areas (|det|^(2/3))."""
+    return abs(np.linalg.det(m[:3, :3])) ** (2.0 / 3.0)
+
+
+def _is_similarity(m) -> bool:
+    a = m[:3, :3]
+    g = a.T @ a
+    return np.allclose(g, np.eye(3) * g[0, 0], rtol=1e-6, atol=1e-9 * max(g[0, 0], 1e-300))
+
+
+def _any_up(d):
+    d = np.asarray(d, dtype=np.float64)
+    return np.array([1.0, 0, 0]) if abs(d[1]) > 0.99 * np.linalg.norm(d) else np.array([0, 1.0, 0])
+
+
+def _affine3_to4(m3):
+    m = np.eye(4)
+    m[:2, :2] = m3[:2, :2]
+    m[:2, 3] = m3[:2, 2]
+    return m
+
+
+def _grid_mesh(fn, nu, nv):
+    """Triangles of a (nu+1) x (nv+1) grid of points fn(u, v), u, v in [0, 1]."""
+    u, v = np.meshgrid(np.linspace(0, 1, nu + 1), np.linspace(0, 1, nv + 1), indexing="ij")
+    pos = fn(u.ravel(), v.ravel())
+    i = np.arange((nu + 1) * (nv + 1)).reshape(nu + 1, nv + 1)
+    a, b, c, d = i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[:-1, 1:].ravel(), i[1:, 1:].ravel()
+    tri = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+    uv = np.stack([u.ravel(), v.ravel()], 1)
+    return pos, tri, None, uv
+
+
+def _sphere_mesh(r, zmin, zmax, phimax, n=96):
+    t0, t1 = math.acos(np.clip(zmin / r, -1, 1)), math.acos(np.clip(zmax / r, -1, 1))
+    ph = math.radians(min(phimax, 360.0))
+
+    def f(u, v):
+        th = t0 + v * (t1 - t0)
+        return np.stack([r * np.sin(th) * np.cos(u * ph), r * np.sin(th) * np.sin(u * ph), r * np.cos(th)], 1)
+    pos, tri, _, uv = _grid_mesh(f, n, n // 2)
+    return pos, tri, pos / r, uv
+
+
+def _disk_mesh(h, r, ri, phimax, n=96):
+    ph = math.radians(min(phimax, 360.0))
+
+    def f(u, v):
+        rr = r + v * (ri - r)
+        return np.stack([rr * np.cos(u * ph), rr * np.sin(u * ph), np.full_like(u, h)], 1)
+    pos, tri, _, uv = _grid_mesh(f, n, 4)
+    return pos, tri, np.tile([0.0, 0.0, 1.0], (len(pos), 1)), uv
+
+
+def _cylinder_mesh(r, zmin, zmax, phimax, n=96):
+    ph = math.radians(min(phimax, 360.0))
+
+    def f(u, v):
+        return np.stack([r * np.cos(u * ph), r * np.sin(u * ph), zmin + v * (zmax - zmin)], 1)
+    pos, tri, _, uv = _grid_mesh(f, n, 4)
+    nrm = pos.copy()
+    nrm[:, 2] = 0
+    return pos, tri, nrm / r, uv
+
+
+def equal_area_to_latlong(img: np.ndarray, height: int | None = None) -> np.ndarray:
+    """Resample pbrt-v4's equal-area octahedral image (Clarberg's mapping, +z up in light
+    space) to a latitude-longitude map in pbrt's light space (rows: polar angle from +z)."""
+    n = img.shape[0]
+    h = height or max(8, n // 2)
+    w = 2 * h
+    theta = (np.arange(h) + 0.5) / h * math.pi
+    phi = (np.arange(w) + 0.5) / w * 2 * math.pi
+    th, ph = np.meshgrid(theta, phi, indexing="ij")
+    # The direction of Mitsuba's envmap texel (u, v) = (phi / 2 pi, theta / pi) in its
+    # +y-up frame, then in pbrt's light space (+z up; the caller's frame maps one to the other).
+    mx, my, mz = np.sin(th) * np.sin(ph), np.cos(th), -np.sin(th) * np.cos(ph)
+    px, py, pz = mx, -mz, my
+    # Clarberg's equal-area sphere -> square (pbrt-v4's EqualAreaSphereToSquare).
+    ax, ay, az = np.abs(px), np.abs(py), np.abs(pz)
+    rr = np.sqrt(np.clip(1 - az, 0, None))
+    a, b = np.maximum(ax, ay), np.minimum(ax, ay)
+    b = np.where(a == 0, 0, b / np.where(a == 0, 1, a))
+    phi_ = np.arctan(b) * 2 / math.pi
+    phi_ = np.where(ax < ay, 1 - phi_, phi_)
+    v = phi_ * rr
+    u = rr - v
+    neg = pz < 0
+    u, v = np.where(neg, 1 - v, u), np.where(neg, 1 - u, v)
+    u, v = np.copysign(u, px), np.copysign(v, py)
+    s, t = (u + 1) / 2, (v + 1) / 2
+    xi = np.clip((s * n).astype(int), 0, n - 1)
+    yi = np.clip((t * n).astype(int), 0, n - 1)
+    return img[yi, xi]
+
+
+@backend.uses_pbr_variant
+def convert(path: str, approximate: bool = False, mesh_dir: str | None = None, skip_missing: bool = False,
+            **overrides):
+    """(scene dict, notes, key path -> ``file:line``) of a pbrt-v4 file (see :func:`to_dict`).
+    ``notes``: ``file:line: ...`` messages on what was ignored or approximated;
+    ``skip_missing``: leave out objects whose files are missing, with a note."""
+    backend.ensure()   # transforms are Mitsuba objects: a variant must be set
+    unknown = set(overrides) - {"spp", "res", "width", "height", "maxdepth"}
+    if unknown:
+        raise XMLError(f"{path}:0: unknown override(s) {sorted(unknown)} (pbrt scenes take spp, res, width, "
+                       "height, maxdepth)")
+    c = PBRTScene(path, approximate, mesh_dir, overrides, skip_missing)
+    d = c.read()
+    return d, c.notes, c.lines
+
+
+@backend.uses_pbr_variant
+def to_dict(path: str, approximate: bool = False, mesh_dir: str | None = None, **overrides) -> dict:
+    """A pbr/Mitsuba scene dict of the pbrt-v4 scene file ``path``.
+
+    ``overrides``: ``spp``, ``res`` (image width, aspect kept) or ``width``/``height``,
+    ``maxdepth`` (pbrt-v4's). ``approximate``: substitute what pbr cannot render (see
+    :func:`convert` for the notes) instead of raising. Meshes are written as PLY files to
+    ``mesh_dir`` (default: a ``pbr-pbrt-meshes`` folder in the temporary directory), so
+    the dict can be saved as Mitsuba XML (``pbr.scene.xml.to_xml``); volume grids stay
+    numpy arrays."""
+    return convert(path, approximate, mesh_dir, **overrides)[0]
