@@ -227,7 +227,9 @@ def _plan(scene, sensor, integrator, spp, chunks):
 def _render_pass(spec, backend_name, values, sensor, integrator, seed, spp, per_pass, p):
     """A worker's task: pass ``p`` of a render. Returns its film sums (numpy float32),
     its count of non-finite samples, the warnings it raised, and timings."""
-    t0 = time.perf_counter()
+    t0, cpu0 = time.perf_counter(), time.process_time()
+    _use_backend(backend_name)
+    t_backend = time.perf_counter() - t0
     entry = _entry(spec, backend_name)
     with entry.lock:
         entry.apply(values)
@@ -243,7 +245,9 @@ def _render_pass(spec, backend_name, values, sensor, integrator, seed, spp, per_
     return {"pass": p, "sums": job.sums[p], "nonfinite": nonfinite,
             "warnings": [(type(w.message), str(w.message)) for w in caught],
             "seconds": time.perf_counter() - t0, "render_seconds": time.perf_counter() - t1,
-            "load_seconds": entry.load_seconds if first else 0.0, "first": first, "pid": os.getpid(),
+            "cpu_seconds": time.process_time() - cpu0,
+            "load_seconds": entry.load_seconds if first else 0.0, "backend_seconds": t_backend, "first": first,
+            "pid": os.getpid(),
             "backend": backend.get_backend()}
 
 
@@ -297,7 +301,8 @@ def render(scene, spp=0, client=None, seed=0, chunks=None, sensor=0, integrator=
     to set first. ``backend``: the workers' (None: CUDA where usable, else LLVM).
     ``retries``: re-runs of a task that raised. ``progress``: a bar of passes done
     (False: none). ``on_nonfinite``: as ``pbr.render``. ``stats``: a list that receives
-    each pass's timings (seconds, render_seconds, load_seconds, first, pid)."""
+    each pass's timings (seconds in the task, cpu_seconds (of the worker process), render_seconds, load_seconds, backend_seconds,
+    first: the worker's first pass of this scene, pid)."""
     _check_client(client)
     spp, seed = _count("spp", spp), _seed("seed", seed)
     if not isinstance(seed, int):
