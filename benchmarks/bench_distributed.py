@@ -1,7 +1,7 @@
 """Throughput of pbr.distributed.render on a LocalCluster of 1, 2, 4 worker processes.
 
     python benchmarks/bench_distributed.py [--res 128 --spp 64 --chunks 8 --renders 3 --workers 1,2,4]
-                                           [--cold-kernel-cache]
+                                           [--cold-kernel-cache] [--backend llvm]
 
 Prints, per cluster size: renders/s (after a warm-up render), the first pass on each
 fresh worker (process start-up, backend, scene load, kernel tracing and compilation or
@@ -69,15 +69,16 @@ def main():
     ap.add_argument("--cold-kernel-cache", action="store_true", help="workers start with an empty kernel cache")
     ap.add_argument("--workers", default="1,2,4")
     ap.add_argument("--integrator", default="path")
+    ap.add_argument("--backend", default="llvm", help="this process's and the workers' backend")
     args = ap.parse_args()
 
-    pbr.set_backend("llvm")
+    pbr.set_backend(args.backend)
     d = pbr.cornell_box(args.res, args.spp)
     d["integrator"] = {"type": args.integrator}
     n_pass = args.spp // args.chunks
     cores = os.cpu_count() or 1
     print(f"cornell box {args.res}x{args.res}, {args.spp} spp, {args.integrator}: {n_pass} passes of "
-          f"{args.chunks} spp; {cores} cores; llvm")
+          f"{args.chunks} spp; {cores} cores; {pbr.get_backend()}")
 
     ref = np.asarray(pd.render(d, spp=args.spp, chunks=args.chunks, progress=False))   # warm-up
 
@@ -104,13 +105,14 @@ def main():
             warm = []
             t1 = time.perf_counter()
             img = np.asarray(pd.render(d, spp=args.spp, chunks=args.chunks, client=client, progress=False,
-                                       stats=warm))
+                                       stats=warm, backend=args.backend))
             first_render = time.perf_counter() - t1
             k_first = _kernels(client)
             assert np.array_equal(img, ref), "distributed render differs from the local one"
             stats, t1, cpu1 = [], time.perf_counter(), time.process_time()
             for i in range(args.renders):
-                pd.render(d, spp=args.spp, chunks=args.chunks, client=client, progress=False, stats=stats)
+                pd.render(d, spp=args.spp, chunks=args.chunks, client=client, progress=False, stats=stats,
+                          backend=args.backend)
             wall = time.perf_counter() - t1
             client_cpu = (time.process_time() - cpu1) / args.renders
             k_later = _kernels(client)

@@ -215,3 +215,16 @@ def test_bad_arguments_are_clear_errors(client, tmp_path):
         pd.render(d, params={"red.nope": 1.0})
     with pytest.raises(ValueError, match="views must be a non-empty list"):
         pd.gradient(d, {KEY: 0.5}, _loss, [])
+
+
+def test_distributed_notebook_runs(tmp_path, monkeypatch):
+    from mitsuba_scenes import run_notebook
+    monkeypatch.chdir(tmp_path)
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    ns = run_notebook(os.path.join(root, "notebooks", "distributed.ipynb"),
+                      {"resolution=128": "resolution=24", "spp=64, chunks=8": "spp=16, chunks=4",
+                       "N_ITER = 8": "N_ITER = 3", '"spp": 8': '"spp": 2', "range(4)": "range(2)"})
+    assert np.array_equal(np.asarray(ns["img"]), np.asarray(ns["local"]))
+    assert ns["errors"][0] > ns["errors"][-1]
+    assert ns["value"][0, 0] > 0.25 and ns["value"][1, 0] < 0.2   # towards the red wall's albedo
+    assert ns["client"].status == "closed"
