@@ -138,9 +138,7 @@ def main():
                   f"trip {noop_ms:.2f} ms; passes per worker: "
                   f"{sorted(np.unique([s['pid'] for s in stats], return_counts=True)[1].tolist())}")
         finally:
-            cluster = client.cluster
             client.close()
-            cluster.close()
 
 
 if __name__ == "__main__":

@@ -28,7 +28,7 @@ def client():
     yield c
     cluster = c.cluster
     c.close()
-    cluster.close()
+    assert cluster.status.name == "closed", "local_client's client owns its cluster"
 
 
 def _scene(res=24, spp=16, integrator="path"):

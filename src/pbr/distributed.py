@@ -498,12 +498,11 @@ def local_client(n_workers: int = 2, threads: int | None = None, **kwargs):
     """A ``dask.distributed.Client`` of a new ``LocalCluster`` of ``n_workers`` worker
     processes, one task at a time each, each with a Dr.Jit pool of ``threads`` threads
     (default: the cores divided among the workers). ``kwargs`` go to ``LocalCluster``.
-    Close it with ``client.close(); client.cluster.close()`` (or use ``with``)."""
+    The client owns the cluster: ``client.close()`` (or leaving ``with``) stops both."""
     distributed = _dask()
     threads = threads or max(1, (os.cpu_count() or 1) // n_workers)
-    kwargs = {"processes": True, "threads_per_worker": 1, "dashboard_address": None, **kwargs}
-    cluster = distributed.LocalCluster(n_workers=n_workers, **kwargs)
-    client = distributed.Client(cluster)
+    kwargs = {"processes": True, "threads_per_worker": 1, "dashboard_address": ":0", **kwargs}
+    client = distributed.Client(n_workers=n_workers, **kwargs)
     client.register_plugin(_worker_plugin(threads))
     return client
 
