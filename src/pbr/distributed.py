@@ -36,7 +36,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from . import backend
+from . import backend as _backend
 from .integrators.base import NonFinite, PassJob, _progress
 from .render import _count, _seed, render as _render
 from .scene import load_dict, load_file, traverse
@@ -162,10 +162,10 @@ def _use_backend(name):
     """Select backend ``name`` for this process (None: keep pbr's, choosing 'auto' in a
     worker, where nothing chose one)."""
     if name is not None:
-        backend.set_backend(name)
-    elif _in_worker() and backend._backend is None:
-        backend.set_backend("auto")
-    return backend.get_backend()
+        _backend.set_backend(name)
+    elif _in_worker() and _backend._backend is None:
+        _backend.set_backend("auto")
+    return _backend.get_backend()
 
 
 def _in_worker() -> bool:
@@ -191,11 +191,12 @@ def _entry(spec, backend_name=None) -> _Entry:
     return entry
 
 
-def cached_scene(scene, params=None, backend_name=None):
+def cached_scene(scene, params=None, backend=None):
     """The scene ``scene`` (a dict, a scene file's path or a :class:`SceneSpec`) loaded
     once per process and kept (the last four), with parameters ``params`` ({key: value})
-    set; for functions that :func:`map` runs. Returns the loaded ``pbr`` scene."""
-    entry = _entry(SceneSpec(scene), backend_name)
+    set, on ``backend`` (None: pbr's; 'auto' in a worker where none was chosen); for
+    functions that :func:`map` runs. Returns the loaded ``pbr`` scene."""
+    entry = _entry(SceneSpec(scene), backend)
     entry.apply(params)
     return entry.scene
 
@@ -248,7 +249,7 @@ def _render_pass(spec, backend_name, values, sensor, integrator, seed, spp, per_
             "cpu_seconds": time.process_time() - cpu0,
             "load_seconds": entry.load_seconds if first else 0.0, "backend_seconds": t_backend, "first": first,
             "pid": os.getpid(),
-            "backend": backend.get_backend()}
+            "backend": _backend.get_backend()}
 
 
 class _Arrivals(Mapping):
@@ -304,6 +305,7 @@ def render(scene, spp=0, client=None, seed=0, chunks=None, sensor=0, integrator=
     each pass's timings (seconds in the task, cpu_seconds (of the worker process), render_seconds, load_seconds, backend_seconds,
     first: the worker's first pass of this scene, pid)."""
     _check_client(client)
+    values = _hosted(params)
     spp, seed = _count("spp", spp), _seed("seed", seed)
     if not isinstance(seed, int):
         raise ValueError(f"pbr.distributed.render: seed must be an integer in [0, 2^32), got {seed!r}")
@@ -324,7 +326,7 @@ def render(scene, spp=0, client=None, seed=0, chunks=None, sensor=0, integrator=
         entry = _entry(spec, None if client is not None else backend)
     with entry.lock:
         try:
-            entry.apply(params)
+            entry.apply(values)
             spp, per_pass, n_pass = _plan(entry.scene, sensor, integrator, spp, chunks)
             integ = _integrator(entry.scene, integrator)
             if client is None:
@@ -336,9 +338,9 @@ def render(scene, spp=0, client=None, seed=0, chunks=None, sensor=0, integrator=
                     stats.append({"seconds": time.perf_counter() - t0, "passes": n_pass, "pid": os.getpid()})
                 return img
             spec_f = client.scatter(spec, broadcast=True, hash=False)
-            token = hashlib.sha1(pickle.dumps((spec.key, params and sorted(params), seed, spp, per_pass, sensor,
+            token = hashlib.sha1(pickle.dumps((spec.key, seed, spp, per_pass, sensor,
                                                time.time_ns()))).hexdigest()[:12]
-            futures = [client.submit(_render_pass, spec_f, backend, _hosted(params), sensor, integrator, seed, spp,
+            futures = [client.submit(_render_pass, spec_f, backend, values, sensor, integrator, seed, spp,
                                      per_pass, p, retries=retries, pure=False, key=f"pbr-pass-{token}-{p}")
                        for p in range(n_pass)]
             bar = _progress(n_pass, progress, desc="pbr.distributed render")
