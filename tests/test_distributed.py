@@ -56,6 +56,14 @@ def test_distributed_render_is_bit_identical_to_the_local_multipass_render(clien
     assert np.array_equal(img, np.asarray(pd.render(d, spp=16, chunks=4, seed=7, progress=False)))
 
 
+def test_a_scene_file_with_overrides_renders_on_the_workers(client, monkeypatch):
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "scenes", "cornell_box.xml")
+    img = np.asarray(pd.render(path, overrides={"res": 16, "spp": 8}, chunks=2, seed=3, client=client,
+                               backend=pbr.get_backend(), progress=False))
+    monkeypatch.setenv("PBR_MAX_SAMPLES_PER_PASS", str(16 * 16 * 2))
+    assert np.array_equal(img, np.asarray(pbr.render(pbr.load_file(path, res=16, spp=8), seed=3, progress=False)))
+
+
 def test_passes_spread_over_both_workers_and_scenes_are_cached(client):
     d = _scene(16, 8)
     stats = []
