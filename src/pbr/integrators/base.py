@@ -2,7 +2,10 @@
 
 One render *pass* is one megakernel over ``width * height * spp_pass`` camera samples laid
 out pixel-major, so a pixel's samples are summed by a local scatter-add inside the kernel.
-Passes bound memory; their number follows from :func:`max_samples_per_pass`.
+Passes bound memory; their number follows from :func:`max_samples_per_pass`. A pass's
+samples depend only on the seed and their sample indices, so passes can be rendered
+anywhere and merged: :class:`PassJob` (``pbr.distributed``) renders some of a render's
+passes, or develops an image from passes rendered elsewhere, bit for bit as one render.
 
 Differentiation follows Path Replay Backpropagation: ``sample`` is written once with a
 ``mode``; the primal pass accumulates radiance, the adjoint passes replay the same
@@ -15,6 +18,7 @@ reports the count (``on_nonfinite``).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import warnings
 
@@ -56,6 +60,27 @@ def max_samples_per_pass() -> int:
     if n <= 0:
         raise ValueError(f"PBR_MAX_SAMPLES_PER_PASS={env!r}: expected a positive integer (samples per pass)")
     return n
+
+
+class PassJob:
+    """Part of a render, for ``pbr.distributed`` (set with ``SamplingIntegrator.pass_job``).
+
+    ``spp_per_pass``: samples per pixel in each pass (a divisor of the render's spp;
+    None: the integrator's own plan). ``run``: the passes (indices) to render; their
+    per-pixel film sums (numpy float32, see ``_pixel_sums``) are stored in ``sums`` by
+    pass index. ``given``: per-pass sums rendered elsewhere, used instead of rendering
+    those passes. The film adds the passes it renders or is given in pass order (float32,
+    as a whole render does), so developing the sums of every pass gives the image of one
+    render bit for bit; the image of a job that lacks passes is not a render's."""
+
+    def __init__(self, spp_per_pass: int | None = None, run=(), given=None):
+        self.spp_per_pass = spp_per_pass
+        self.run = set(run)
+        self.given = {} if given is None else given     # a mapping (it may fetch on demand)
+        self.sums = {}
+
+    def wants(self, p: int) -> bool:
+        return p in self.run or p in self.given
 
 
 class NonFinite:
@@ -117,6 +142,11 @@ class SamplingIntegrator:
     recorder = None
     # The count of non-finite samples of the current render (pbr.render sets a fresh one).
     nonfinite = None
+    # Whether render() is the film of independent camera-sample passes (_film), so that
+    # a PassJob can split it; light tracers, sppm and mlt render otherwise.
+    pass_separable = True
+    # The PassJob of the current render (pass_job), None for a whole render.
+    job = None
 
     def __init__(self, props):
         self.path = props.path
@@ -152,6 +182,18 @@ class SamplingIntegrator:
             if len(scene.media):
                 raise SceneError(f"{self.path}: the {self.name} integrator does not support participating media")
 
+    @contextlib.contextmanager
+    def pass_job(self, job: PassJob):
+        """Within the block, ``render`` does ``job`` (a part of the render; see PassJob)."""
+        if not self.pass_separable:
+            raise NotImplementedError(f"{self.path}: the {self.name!r} integrator does not render independent "
+                                      f"camera-sample passes, so its passes cannot be rendered apart")
+        self.job = job
+        try:
+            yield job
+        finally:
+            self.job = None
+
     def counter(self) -> NonFinite:
         """The non-finite sample counter of the current render (made on first use)."""
         if not isinstance(self.nonfinite, NonFinite):
@@ -168,9 +210,14 @@ class SamplingIntegrator:
         cam = scene.sensors[sensor]
         w, h = cam.film.size
         spp = int(spp) if spp else cam.sampler.sample_count
-        per_pass = max(1, min(spp, max_samples_per_pass() // (w * h)))
-        while spp % per_pass:
-            per_pass -= 1
+        if self.job is not None and self.job.spp_per_pass:
+            per_pass = self.job.spp_per_pass
+            if spp % per_pass:
+                raise ValueError(f"{self.path}: {per_pass} samples per pass do not divide the {spp} samples per pixel")
+        else:
+            per_pass = max(1, min(spp, max_samples_per_pass() // (w * h)))
+            while spp % per_pass:
+                per_pass -= 1
         memory.check_render(w, h, per_pass, 4, f"sensor {sensor}")
         return cam, w, h, spp, per_pass, spp // per_pass
 
@@ -203,16 +250,23 @@ class SamplingIntegrator:
         per-sample ``mi.Float`` (AOVs): they are developed with the same filter weights
         and appended after R, G, B, giving an (H, W, 3 + len(channels)) tensor."""
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
-        sums = None
+        sums, job = None, self.job
         bar = _progress(n_pass, progress)
         for p in range(n_pass):
+            if job is not None and not job.wants(p):
+                continue
             with dr.suspend_grad():
-                rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
-                out = radiance(rng, ray, wl, inside)
-                L, extra = out if isinstance(out, tuple) else (out, ())
-                xyz, *extra = self.counter().replace([spec.to_xyz(L, wl) * weight, *extra], inside)
-                extra = [c * weight for c in extra]
-                s = _pixel_sums([*xyz, weight, *extra], w * h, per_pass)
+                if job is not None and p in job.given:
+                    s = mi.Float(job.given[p])
+                else:
+                    rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
+                    out = radiance(rng, ray, wl, inside)
+                    L, extra = out if isinstance(out, tuple) else (out, ())
+                    xyz, *extra = self.counter().replace([spec.to_xyz(L, wl) * weight, *extra], inside)
+                    extra = [c * weight for c in extra]
+                    s = _pixel_sums([*xyz, weight, *extra], w * h, per_pass)
+                    if job is not None:
+                        job.sums[p] = np.array(s, dtype=np.float32)
                 sums = s if sums is None else sums + s
                 if n_pass > 1:
                     dr.eval(sums)               # one kernel per pass
@@ -361,14 +415,15 @@ def _snapshot(rng):
     return type(st)(st), type(inc)(inc)
 
 
-def _progress(n_pass, progress):
+def _progress(n_pass, progress, desc="pbr render", unit="pass"):
+    """A tqdm bar over ``n_pass`` steps (None for one step, or ``progress=False``)."""
     if n_pass <= 1 or progress is False:
         return None
     try:
         from tqdm.auto import tqdm
     except ImportError:  # pragma: no cover
         return None
-    return tqdm(total=n_pass, desc="pbr render", unit="pass", leave=False)
+    return tqdm(total=n_pass, desc=desc, unit=unit, leave=False)
 
 
 def depth_limit(max_depth: int) -> int:

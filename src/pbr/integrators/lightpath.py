@@ -104,6 +104,8 @@ class LightTracingIntegrator(SamplingIntegrator):
     ``self.camera`` the sensor being rendered): ``render`` = the camera-sample image plus
     the splatted image over ``spp``. Primal only."""
 
+    pass_separable = False    # the splat film (float64 sums) spans passes
+
     needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
     traces_light_paths = True
 

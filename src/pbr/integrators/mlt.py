@@ -171,6 +171,8 @@ class MLTIntegrator(SamplingIntegrator):
     ====================  =====  =======  ====================================================
     """
 
+    pass_separable = False    # Markov chains run on across passes
+
     needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
     name = "mlt"
     traces_light_paths = True

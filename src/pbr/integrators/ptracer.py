@@ -35,6 +35,8 @@ class ParticleTracerIntegrator(SamplingIntegrator):
     ================  ====  =======  ===============================================================
     """
 
+    pass_separable = False    # the splat film (float64 sums) spans passes
+
     needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
     name = "ptracer"
     traces_light_paths = True

@@ -106,6 +106,8 @@ class SPPMIntegrator(SamplingIntegrator):
     ===================  ======  =======  =========================================================
     """
 
+    pass_separable = False    # pixel statistics carry over between iterations
+
     name = "sppm"
     traces_light_paths = True
     GAMMA = 2.0 / 3.0      # fraction of new photons kept per iteration (Hachisuka & Jensen)
