@@ -129,9 +129,11 @@ class SamplingIntegrator:
         scene's current lights (cached per scene build by ``LightSet.sampler``)."""
         self.check(scene)
         cam = scene.sensors[sensor] if 0 <= sensor < len(scene.sensors) else None
-        if self.needs_pinhole and cam is not None and type(cam).name != "perspective":
+        if self.needs_pinhole and cam is not None and not getattr(cam, "pinhole", False):
+            name = type(cam).name
+            what = repr(name) if name != "perspective" else "a 'perspective' camera with a lens or motion"
             raise SceneError(f"{self.path}: the {self.name!r} integrator connects paths to the camera, which needs "
-                             f"a 'perspective' camera (sensor {sensor} is {type(cam).name!r})")
+                             f"a 'perspective' camera (sensor {sensor} is {what}), static and without a lens")
         self.light_sampler = scene.lights.sampler(self.light_sampler_type)
         if self.traces_light_paths:
             self.emission_sampler = scene.lights.sampler("power")
@@ -190,7 +192,8 @@ class SamplingIntegrator:
         inside = (px >= 0) & (px < w) & (py >= 0) & (py < h)
         weight = dr.select(inside, weight, 0.0)
         aperture = mi.Point2f(rng.next_float32(), rng.next_float32()) if cam.needs_aperture_sample else None
-        ray = cam.sample_ray(mi.Point2f(px / w, py / h), aperture)
+        time = cam.sample_time(rng.next_float32()) if getattr(cam, "motion", None) is not None else None
+        ray = cam.sample_ray(mi.Point2f(px / w, py / h), aperture, time)
         return rng, wl, ray, weight, inside
 
     # -- rendering ------------------------------------------------------------------------
