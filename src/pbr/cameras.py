@@ -224,10 +224,11 @@ class ProjectiveCamera:
         return mi.Point3f(*[r[k] + o[k] for k in range(3)]) if point else mi.Vector3f(*r)
 
     # -- footprints of camera rays (MIP-mapped textures): pbrt-v4's Approximate_dp_dxy --
-    def _min_differentials(self):
+    def min_differentials(self):
         """pbrt-v4's ``FindMinimumDifferentials``: the smallest position and direction
         changes (camera space; directions in a frame whose z is the ray) of a one-pixel
-        step along x and y, over 512 points on the film's diagonal, lens at its centre."""
+        step along x and y, over 512 points on the film's diagonal, lens at its centre.
+        Computed once (it evaluates rays: call it outside render kernels)."""
         if getattr(self, "_min_diff", None) is None:
             n = 512
             cw, ch = self.film.size
@@ -238,9 +239,12 @@ class ProjectiveCamera:
             rays = [self.sample_ray(mi.Point2f(pos.x + dx, pos.y + dy), ap, tm)
                     for dx, dy in ((0.0, 0.0), (1.0 / cw, 0.0), (0.0, 1.0 / ch))]
             inv = np.linalg.inv(self.to_world)
-            o = [inv[:3, :3] @ np.array(r.o, np.float64).reshape(3, -1) for r in rays]
+            o = [inv[:3, :3] @ np.array(r.o, np.float64).reshape(3, -1) + inv[:3, 3:] for r in rays]
             d = [inv[:3, :3] @ np.array(r.d, np.float64).reshape(3, -1) for r in rays]
             d = [x / np.linalg.norm(x, axis=0) for x in d]
+            for oi, di in zip(o, d):     # origins back from the near plane to the lens plane z = 0
+                ok = np.abs(di[2]) > 1e-6
+                oi -= np.where(ok, di * (oi[2] / np.where(ok, di[2], 1.0)), 0.0)
             out = []
             for k in (1, 2):
                 dpos = (o[k] - o[0]).T
@@ -261,7 +265,7 @@ class ProjectiveCamera:
         space) under a one-pixel step of the camera ray, estimated from the camera's
         minimum differentials, scaled by max(1/8, 1/sqrt(spp)) (pbrt-v4's
         ``Approximate_dp_dxy``: no differentials are carried along paths)."""
-        pdx, pdy, ddx, ddy = self._min_differentials()
+        pdx, pdy, ddx, ddy = self.min_differentials()
         lin, o = self._frame(None)
         inv = np.linalg.inv(np.asarray(self.to_world, np.float64)[:3, :3]).tolist()
         q = p - mi.Point3f(*o)

@@ -174,6 +174,12 @@ class SamplingIntegrator:
         while spp % per_pass:
             per_pass -= 1
         memory.check_render(w, h, per_pass, 4, f"sensor {sensor}")
+        textures = getattr(scene, "textures", None)
+        if textures is not None and textures.needs_footprint and hasattr(cam, "approximate_dp_dxy"):
+            # Procedural and MIP-mapped textures filter over this camera's pixel footprint
+            # (its minimum ray differentials are found here, outside the render kernels).
+            cam.min_differentials()
+            textures.footprint = (cam, spp)
         return cam, w, h, spp, per_pass, spp // per_pass
 
     def _camera_samples(self, cam, w, h, spp, per_pass, pass_index, seed):

@@ -1,0 +1,244 @@
+"""pbrt-v4's procedural textures against an independent NumPy evaluation of pbrt-v4's
+formulas (Perlin noise with pbrt-v4's permutation table, FBm, Turbulence, windy, marble,
+polka dots, the filtered checkerboard), the pixel footprint of the camera, and the
+textures in renders."""
+
+import math
+
+import numpy as np
+import pytest
+import drjit as dr
+import mitsuba as mi
+
+import pbr
+from pbr.cameras import SENSORS
+from pbr.plugins.props import Props, SceneError
+from pbr.textures import procedural as P
+
+PERM = P.NOISE_PERM.astype(np.int64)
+
+
+# ------------------------------------------------------------ NumPy reference (float64)
+
+def np_noise(x, y, z):
+    x, y, z = (np.fmod(np.asarray(c, np.float64), float(1 << 30)) for c in (x, y, z))
+    ix, iy, iz = (np.floor(c).astype(np.int64) for c in (x, y, z))
+    dx, dy, dz = x - ix, y - iy, z - iz
+    ix, iy, iz = ix & 255, iy & 255, iz & 255
+
+    def grad(a, b, c, fx, fy, fz):
+        h = PERM[PERM[PERM[a] + b] + c] & 15
+        u = np.where((h < 8) | (h == 12) | (h == 13), fx, fy)
+        v = np.where((h < 4) | (h == 12) | (h == 13), fy, fz)
+        return np.where(h & 1, -u, u) + np.where(h & 2, -v, v)
+
+    def wgt(t):
+        return 6 * t ** 5 - 15 * t ** 4 + 10 * t ** 3
+
+    def lerp(t, a, b):
+        return (1 - t) * a + t * b
+    w = {(a, b, c): grad(ix + a, iy + b, iz + c, dx - a, dy - b, dz - c) for a in (0, 1) for b in (0, 1) for c in (0, 1)}
+    wx, wy, wz = wgt(dx), wgt(dy), wgt(dz)
+    x00, x10 = lerp(wx, w[0, 0, 0], w[1, 0, 0]), lerp(wx, w[0, 1, 0], w[1, 1, 0])
+    x01, x11 = lerp(wx, w[0, 0, 1], w[1, 0, 1]), lerp(wx, w[0, 1, 1], w[1, 1, 1])
+    return lerp(wz, lerp(wy, x00, x10), lerp(wy, x01, x11))
+
+
+def np_smoothstep(x, a, b):
+    t = np.clip((x - a) / (b - a), 0, 1)
+    return t * t * (3 - 2 * t)
+
+
+def np_octaves(dpdx, dpdy, max_oct):
+    len2 = np.maximum((dpdx ** 2).sum(0), (dpdy ** 2).sum(0))
+    with np.errstate(divide="ignore"):
+        n = np.clip(-1 - np.log2(len2) / 2, 0, max_oct)
+    return n, np.floor(n).astype(np.int64)
+
+
+def np_fbm(p, dpdx, dpdy, omega, max_oct):
+    n, n_int = np_octaves(dpdx, dpdy, max_oct)
+    out = np.zeros(p.shape[1])
+    for k in range(p.shape[1]):
+        s, lam, o = 0.0, 1.0, 1.0
+        for _ in range(n_int[k]):
+            s += o * np_noise(*(lam * p[:, k]))
+            lam *= 1.99
+            o *= omega
+        s += o * np_smoothstep(n[k] - n_int[k], .3, .7) * np_noise(*(lam * p[:, k]))
+        out[k] = s
+    return out
+
+
+def np_turbulence(p, dpdx, dpdy, omega, max_oct):
+    n, n_int = np_octaves(dpdx, dpdy, max_oct)
+    out = np.zeros(p.shape[1])
+    for k in range(p.shape[1]):
+        s, lam, o = 0.0, 1.0, 1.0
+        for _ in range(n_int[k]):
+            s += o * abs(np_noise(*(lam * p[:, k])))
+            lam *= 1.99
+            o *= omega
+        t = np_smoothstep(n[k] - n_int[k], .3, .7)
+        s += o * ((1 - t) * 0.2 + t * abs(np_noise(*(lam * p[:, k]))))
+        for _ in range(n_int[k], max_oct):
+            s += o * 0.2
+            o *= omega
+        out[k] = s
+    return out
+
+
+def np_checker_bump(x, r):
+    def d(t):
+        y = t / 2 - np.floor(t / 2) - 0.5
+        return t / 2 + y * (1 - 2 * np.abs(y))
+    plain = 1 - 2 * (np.floor(x).astype(np.int64) & 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        filt = (d(x + r) - 2 * d(x) + d(x - r)) / r ** 2
+    return np.where(np.floor(x - r) == np.floor(x + r), plain, filt)
+
+
+def np_polka(s, t):
+    sc, tc = np.floor(s + .5), np.floor(t + .5)
+    z = np.zeros_like(s)
+    s0 = sc + 0.15 * np_noise(sc + 1.5, tc + 2.8, z)
+    t0 = tc + 0.15 * np_noise(sc + 4.5, tc + 9.8, z)
+    return (np_noise(sc + .5, tc + .5, z) > 0) & ((s - s0) ** 2 + (t - t0) ** 2 < 0.35 ** 2)
+
+
+def np_marble(p, dpdx, dpdy, omega, octaves, scale, variation):
+    p = p * scale
+    m = p[1] + variation * np_fbm(p, dpdx * scale, dpdy * scale, omega, octaves)
+    t = .5 + .5 * np.sin(m)
+    c = np.array(P.MARBLE_COLORS)
+    first = np.minimum(np.floor(t * 6).astype(np.int64), 5)
+    t = t * 6 - first
+    b = [(1 - t) ** 3, 3 * (1 - t) ** 2 * t, 3 * (1 - t) * t ** 2, t ** 3]
+    return 1.5 * sum(b[j][:, None] * c[first + j] for j in range(4))
+
+
+# ------------------------------------------------------------------------- helpers
+
+def _points(n=2000, seed=0, spread=40.0):
+    rng = np.random.default_rng(seed)
+    return (rng.random((3, n)) - 0.5) * spread
+
+
+def _perm():
+    return mi.UInt32(P.NOISE_PERM)
+
+
+def _v(a):
+    return mi.Vector3f(*[mi.Float(np.asarray(r, np.float32)) for r in a])
+
+
+def test_noise_matches_pbrt():
+    p = _points().astype(np.float32)
+    got = np.array(P.noise(_perm(), *[mi.Float(c) for c in p]))
+    ref = np_noise(*p.astype(np.float64))
+    assert np.abs(got - ref).max() < 2e-5
+    assert np.abs(ref).max() <= 1.0 and ref.std() > 0.1
+    # integer lattice points are zeros of gradient noise
+    q = np.floor(p)
+    assert np.abs(np.array(P.noise(_perm(), *[mi.Float(c) for c in q]))).max() < 1e-6
+
+
+@pytest.mark.parametrize("footprint", [0.0, 0.01, 0.3])
+def test_fbm_and_turbulence_match_pbrt(footprint):
+    """With a footprint, the octaves past its frequency fade out (fbm) or count 0.2
+    (turbulence), as pbrt-v4's FBm/Turbulence."""
+    p = _points(500, seed=1, spread=8.0).astype(np.float32)
+    rng = np.random.default_rng(2)
+    dpdx = (rng.standard_normal((3, 500)) * footprint).astype(np.float32)
+    dpdy = (rng.standard_normal((3, 500)) * footprint).astype(np.float32)
+    f, t = P.octave_sums(_perm(), _v(p), _v(dpdx), _v(dpdy), mi.Float(0.6), mi.UInt32(7), 7, True, True)
+    assert np.abs(np.array(f) - np_fbm(p.astype(np.float64), dpdx, dpdy, 0.6, 7)).max() < 2e-4
+    assert np.abs(np.array(t) - np_turbulence(p.astype(np.float64), dpdx, dpdy, 0.6, 7)).max() < 2e-4
+
+
+def test_marble_dots_and_checkerboard_match_pbrt():
+    p = _points(400, seed=3, spread=6.0).astype(np.float32)
+    z = np.zeros_like(p)
+    rgb = P.marble_rgb(_perm(), _v(p), _v(z), _v(z), mi.Float(0.5), mi.UInt32(8), mi.Float(2.0), mi.Float(0.4), 8)
+    ref = np_marble(p.astype(np.float64), z, z, 0.5, 8, 2.0, 0.4)
+    assert np.abs(np.array(rgb).T - ref).max() < 1e-4
+    st = p[:2] * 3
+    inside = np.array(P.inside_polka_dot(_perm(), mi.Point2f(*[mi.Float(c) for c in st])))
+    ref_in = np_polka(*st.astype(np.float64))
+    assert np.mean(inside != ref_in) < 0.005 and 0.1 < ref_in.mean() < 0.5
+    x = (p[0] * 0.7).astype(np.float32)
+    r = np.abs(p[1] * 0.1).astype(np.float32)
+    got = np.array(P._checker_bump(mi.Float(x), mi.Float(r)))
+    assert np.abs(got - np_checker_bump(x.astype(np.float64), r.astype(np.float64))).max() < 1e-3
+
+
+def test_camera_footprint_on_a_facing_plane():
+    """pbrt-v4's Approximate_dp_dxy: the smallest one-pixel direction change over the
+    film's diagonal (for a pinhole, at the corners: cos^2 of the corner angle times the
+    centre's) applied at the hit: on a plane facing the camera at distance z on its
+    axis, |dp/dx| = z * that change, times max(1/8, 1/sqrt(spp)); a plane seen at 60
+    degrees stretches it by 1 / cos 60."""
+    w, h, fov, z = 200, 100, 60.0, 3.0
+    cam = SENSORS["perspective"](Props({"type": "perspective", "fov": fov,
+                                        "film": {"type": "hdrfilm", "width": w, "height": h}}, "sensor"))
+    tx = math.tan(math.radians(fov) / 2)
+    t = np.linspace(0, 1, 512)
+    x, y = (1 - 2 * t) * tx, (1 - 2 * t) * tx * h / w
+    d0 = np.stack([x, y, np.ones_like(x)])
+    d1 = np.stack([x - 2 * tx / w, y, np.ones_like(x)])
+    diff = d1 / np.linalg.norm(d1, axis=0) - d0 / np.linalg.norm(d0, axis=0)
+    smallest = np.linalg.norm(diff, axis=0).min()
+    assert smallest < 0.8 * 2 * tx / w           # the corners' pixels subtend less
+    dpdx, dpdy = cam.approximate_dp_dxy(mi.Point3f(0.0, 0.0, z), mi.Normal3f(0.0, 0.0, -1.0), 16)
+    assert float(dr.norm(dpdx)[0]) == pytest.approx(z * smallest / 4, rel=2e-3)
+    assert abs(float(dpdx.z[0])) < 1e-6 and abs(float(dpdy.z[0])) < 1e-6
+    n = mi.Normal3f(math.sin(math.radians(60)), 0.0, -math.cos(math.radians(60)))
+    dpdx, _ = cam.approximate_dp_dxy(mi.Point3f(0.0, 0.0, z), n, 1)
+    assert float(dr.norm(dpdx)[0]) == pytest.approx(z * smallest / math.cos(math.radians(60)), rel=0.05)
+
+
+def _plane_scene(tex, res=32, spp=16, dist=2.0):
+    return {"type": "scene", "integrator": {"type": "direct"},
+            "cam": {"type": "perspective", "fov": 40.0,
+                    "to_world": mi.ScalarTransform4f().look_at([0, 0, dist], [0, 0, 0], [0, 1, 0]),
+                    "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}},
+                    "sampler": {"type": "independent", "sample_count": spp}},
+            "plane": {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": tex}},
+            "sky": {"type": "constant", "radiance": {"type": "rgb", "value": 1.0}}}
+
+
+def test_textures_render_and_antialias():
+    """Every pattern renders finite; a checkerboard far finer than the pixels renders
+    its mean 0.5 (filtered), and the 3D checkerboard too."""
+    for tex in [{"type": "fbm"}, {"type": "wrinkled", "octaves": 4}, {"type": "windy"},
+                {"type": "marble", "scale": 3.0}, {"type": "dots", "uscale": 6, "vscale": 6},
+                {"type": "dots", "mapping": "cylindrical"}, {"type": "checkerboard", "mapping": "spherical"},
+                {"type": "checkerboard", "mapping": "planar", "v1": [3, 0, 0], "v2": [0, 3, 0], "udelta": 0.5}]:
+        img = np.asarray(pbr.render(pbr.load_dict(_plane_scene(tex)), spp=4))
+        assert np.isfinite(img).all() and img.max() > 0, tex
+    # Same seed, same paths: the filtered pattern equals a constant 0.5 albedo.
+    grey = np.asarray(pbr.render(pbr.load_dict(_plane_scene(0.5)), spp=1, seed=1))[8:24, 8:24]
+    fine = {"type": "checkerboard", "uscale": 2000.0, "vscale": 2000.0, "tex1": 0.8, "tex2": 0.2}
+    img = np.asarray(pbr.render(pbr.load_dict(_plane_scene(fine)), spp=1, seed=1))[8:24, 8:24]
+    assert np.abs(img - grey).max() < 0.01 * grey.max()
+    fine3 = {"type": "checkerboard", "dimension": 3, "to_world": mi.ScalarTransform4f().scale(1e-3),
+             "tex1": 0.8, "tex2": 0.2}
+    img = np.asarray(pbr.render(pbr.load_dict(_plane_scene(fine3)), spp=1, seed=1))[8:24, 8:24]
+    assert np.abs(img - grey).max() < 0.01 * grey.max()
+
+
+def test_pbrt_checkerboard_pattern_and_errors():
+    """tex1 where floor(s) + floor(t) is even (pbrt-v4), seen where the squares are big."""
+    big = {"type": "checkerboard", "tex1": 0.8, "tex2": 0.2}
+    img = np.asarray(pbr.render(pbr.load_dict(_plane_scene(big, res=16)), spp=4, seed=2))[4:12, 4:12]
+    ref = np.asarray(pbr.render(pbr.load_dict(_plane_scene(0.8, res=16)), spp=4, seed=2))[4:12, 4:12]
+    # the rectangle's uv covers [0, 1)^2, one square (even): all tex1
+    assert np.abs(img - ref).max() < 1e-3
+    with pytest.raises(SceneError, match="reflectance.color0: Mitsuba's checkerboard parameter mixed"):
+        pbr.load_dict(_plane_scene({"type": "checkerboard", "tex1": 0.5, "color0": 0.3}))
+    with pytest.raises(SceneError, match="reflectance.dimension: expected 2 or 3"):
+        pbr.load_dict(_plane_scene({"type": "checkerboard", "dimension": 4}))
+    with pytest.raises(SceneError, match="reflectance.mapping: expected one of"):
+        pbr.load_dict(_plane_scene({"type": "dots", "mapping": "sphere"}))
+    with pytest.raises(SceneError, match="reflectance.uscale: unknown parameter"):
+        pbr.load_dict(_plane_scene({"type": "checkerboard", "dimension": 3, "uscale": 2.0}))
