@@ -197,10 +197,11 @@ def test_camera_footprint_on_a_facing_plane():
     assert float(dr.norm(dpdx)[0]) == pytest.approx(z * smallest / math.cos(math.radians(60)), rel=0.05)
 
 
-def _plane_scene(tex, res=32, spp=16, dist=2.0):
+def _plane_scene(tex, res=32, spp=16, dist=2.0, grazing=False):
+    look = (mi.ScalarTransform4f().look_at([0, -1.2, 0.12], [0, 0.5, 0], [0, 0, 1]) if grazing else
+            mi.ScalarTransform4f().look_at([0, 0, dist], [0, 0, 0], [0, 1, 0]))
     return {"type": "scene", "integrator": {"type": "direct"},
-            "cam": {"type": "perspective", "fov": 40.0,
-                    "to_world": mi.ScalarTransform4f().look_at([0, 0, dist], [0, 0, 0], [0, 1, 0]),
+            "cam": {"type": "perspective", "fov": 40.0, "to_world": look,
                     "film": {"type": "hdrfilm", "width": res, "height": res, "rfilter": {"type": "box"}},
                     "sampler": {"type": "independent", "sample_count": spp}},
             "plane": {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": tex}},
@@ -242,3 +243,122 @@ def test_pbrt_checkerboard_pattern_and_errors():
         pbr.load_dict(_plane_scene({"type": "dots", "mapping": "sphere"}))
     with pytest.raises(SceneError, match="reflectance.uscale: unknown parameter"):
         pbr.load_dict(_plane_scene({"type": "checkerboard", "dimension": 3, "uscale": 2.0}))
+
+
+# ------------------------------------------------------------------ imagemap (MIP maps)
+
+from pbr.textures import mipmap as MM  # noqa: E402
+
+
+def _checker(n=256, square=1):
+    i = np.arange(n) // square
+    return ((i[:, None] + i[None, :]) % 2).astype(np.float32)
+
+
+def _lookups(tex, res=32, spp=1, seed=1, **kw):
+    """Per-pixel texture values seen by 1-sample pixels: the render over a grey (0.5)
+    render with the same seed (same paths, diffuse plane, direct lighting)."""
+    grey = np.asarray(pbr.render(pbr.load_dict(_plane_scene(0.5, res=res, **kw)), spp=spp, seed=seed))
+    img = np.asarray(pbr.render(pbr.load_dict(_plane_scene(tex, res=res, **kw)), spp=spp, seed=seed))
+    return (img / grey * 0.5).mean(axis=2)[4:res - 4, 4:res - 4]
+
+
+def test_pyramid_is_pbrts():
+    """Powers of two: 2x2 box steps down to 1x1 (the top is the mean); other sizes are
+    first resampled up to the next powers of two (values >= 0, the mean kept)."""
+    rng = np.random.default_rng(0)
+    img = rng.random((8, 16, 3)).astype(np.float32)
+    lv = MM.generate_pyramid(img, "repeat")
+    assert [x.shape[:2] for x in lv] == [(8, 16), (4, 8), (2, 4), (1, 2), (1, 1)]
+    assert np.allclose(lv[1][1, 2], img[2:4, 4:6].mean(axis=(0, 1)), atol=1e-6)
+    assert np.allclose(lv[-1][0, 0], img.mean(axis=(0, 1)), atol=1e-5)
+    odd = rng.random((5, 7, 3)).astype(np.float32)
+    lv = MM.generate_pyramid(odd, "repeat")
+    assert lv[0].shape[:2] == (8, 8) and lv[0].min() >= 0
+    assert np.allclose(lv[-1][0, 0], odd.mean(axis=(0, 1)), atol=0.02)
+
+
+def np_ewa(level, st, d0, d1, wrap="repeat"):
+    """pbrt-v4's MIPMap::EWA on one level image (h, w, 3), NumPy, one lookup."""
+    h, w = level.shape[:2]
+    s, t = st[0] * w - 0.5, st[1] * h - 0.5
+    a0, a1, b0, b1 = d0[0] * w, d0[1] * h, d1[0] * w, d1[1] * h
+    A, B, C = a1 ** 2 + b1 ** 2 + 1, -2 * (a0 * a1 + b0 * b1), a0 ** 2 + b0 ** 2 + 1
+    f = 1 / (A * C - B * B / 4)
+    A, B, C = A * f, B * f, C * f
+    det = 4 * A * C - B * B
+    us, vs = math.sqrt(det * C), math.sqrt(A * det)
+    total, wsum = np.zeros(3), 0.0
+    for it in range(math.ceil(t - 2 / det * vs), math.floor(t + 2 / det * vs) + 1):
+        for i_s in range(math.ceil(s - 2 / det * us), math.floor(s + 2 / det * us) + 1):
+            r2 = A * (i_s - s) ** 2 + B * (i_s - s) * (it - t) + C * (it - t) ** 2
+            if r2 < 1:
+                wt = MM.EWA_LUT[min(int(r2 * 128), 127)]
+                total += wt * level[it % h, i_s % w]
+                wsum += wt
+    return total / wsum
+
+
+def test_ewa_and_bilerp_match_pbrt():
+    rng = np.random.default_rng(5)
+    img = rng.random((32, 64, 3)).astype(np.float32)
+    tex = MM.MipMap("t", img, "ewa", "repeat", 8.0, 1.0, False, "albedo",
+                    P.Procedural("t.m", P.CHECKER2D, P.MAP_UV, np.eye(4)))
+    T = MM.build_table([tex])
+    n = 64
+    st = rng.random((2, n)).astype(np.float32)
+    ang = rng.random(n) * math.pi
+    d0 = np.stack([np.cos(ang), np.sin(ang)]) * 0.05
+    d1 = np.stack([-np.sin(ang), np.cos(ang)]) * 0.012
+    for level in (0, 1, 2):
+        lv = MM._Level(T, mi.UInt32(0), mi.Int32(level), mi.UInt32(0), mi.Bool(True))
+        got = np.array(lv.ewa(mi.Point2f(*st), mi.Vector2f(*d0.astype(np.float32)),
+                              mi.Vector2f(*d1.astype(np.float32)), T.ewa_lut)).T
+        ref = np.array([np_ewa(tex.levels[level], st[:, k], d0[:, k], d1[:, k]) for k in range(n)])
+        assert np.abs(got - ref).max() < 1e-4, level
+        bil = np.array(lv.bilerp(mi.Point2f(*st))).T
+        L = tex.levels[level].astype(np.float64)
+        h, w = L.shape[:2]
+        x, y = st[0] * w - 0.5, st[1] * h - 0.5
+        x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+        fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+        ref = ((1 - fx) * (1 - fy) * L[y0 % h, x0 % w] + fx * (1 - fy) * L[y0 % h, (x0 + 1) % w]
+               + (1 - fx) * fy * L[(y0 + 1) % h, x0 % w] + fx * fy * L[(y0 + 1) % h, (x0 + 1) % w])
+        assert np.abs(bil - ref).max() < 1e-5
+
+
+@pytest.mark.parametrize("filt", ["point", "bilinear", "trilinear", "ewa"])
+def test_minified_checker_renders_its_mean(filt):
+    """A 256^2 checker of 1-texel squares seen ~8 texels per pixel: the MIP-mapped lookups
+    give its mean 0.5 at one sample per pixel; Mitsuba's bitmap (no MIP map) samples
+    texels and aliases (0 or 1 per pixel)."""
+    r = _lookups({"type": "imagemap", "data": _checker(), "filter": filt})
+    assert np.abs(r - 0.5).max() < 0.02
+    if filt == "point":
+        raw = _lookups({"type": "bitmap", "data": _checker(), "filter_type": "nearest", "raw": True})
+        assert raw.std() > 0.4
+
+
+def test_ewa_keeps_detail_that_trilinear_blurs():
+    """Stripes across s seen at a grazing angle (t minified ~16x more than s): EWA's
+    footprint ellipse keeps the stripes (its level follows the minor axis), trilinear's
+    isotropic width blurs them to grey; with maxanisotropy 1 EWA blurs too."""
+    n = 256
+    stripes = np.repeat(((np.arange(n) // 8) % 2).astype(np.float32)[None, :], n, axis=0)
+    def contrast(**tex):
+        r = _lookups({"type": "imagemap", "data": stripes, "vscale": 16.0, **tex}, res=48, grazing=True)
+        return r.std()
+    ewa, tri, iso = contrast(filter="ewa"), contrast(filter="trilinear"), contrast(filter="ewa", maxanisotropy=1.0)
+    assert ewa > 0.15 and tri < 0.05 and iso < 0.05, (ewa, tri, iso)
+
+
+def test_imagemap_errors_and_flip(tmp_path):
+    with pytest.raises(SceneError, match="reflectance.filter: expected one of"):
+        pbr.load_dict(_plane_scene({"type": "imagemap", "data": _checker(4), "filter": "cubic"}))
+    with pytest.raises(SceneError, match="reflectance.wrap: 'octahedralsphere' is not supported"):
+        pbr.load_dict(_plane_scene({"type": "imagemap", "data": _checker(4), "wrap": "octahedralsphere"}))
+    # t is flipped: the image's top row is seen at t = 1 (the rectangle's top edge).
+    top_white = np.zeros((16, 16), np.float32)
+    top_white[:8] = 1.0
+    r = _lookups({"type": "imagemap", "data": top_white, "filter": "point"}, res=16)
+    assert r[:2].mean() > 0.9 and r[-2:].mean() < 0.1

@@ -27,7 +27,7 @@ from ..image import linear_to_srgb, read_image
 from ..plugins.params import check_params
 from ..plugins.props import ALBEDO, FINITE, RADIANCE, UNIT, Props, Range, SceneError, did_you_mean
 from ..plugins.registry import Registry
-from . import meshattr, procedural
+from . import meshattr, mipmap, procedural
 from .kinds import (BASE_ONE, BASE_SIGMOID, BASE_TABLE, CONSTANT, OP_CHECKER, OP_MIX, OP_SCALE, TAB_N, Bitmap,
                     Checkerboard, Composite, ConstantSpectrum, MeshAttribute)
 
@@ -458,6 +458,63 @@ def _dots(loader, p, form, emitter, unbounded):
     ========  =========  =========  =================================================
     """
     return _pbrt_blend(loader, p, form, emitter, unbounded, procedural.DOTS, ("inside", 1.0), ("outside", 0.0), True)
+
+
+@TEXTURE_TYPES.register("imagemap")
+def _imagemap(loader, p, form, emitter, unbounded):
+    """``imagemap`` (pbrt-v4's): an image with a MIP pyramid, filtered over the pixel
+    footprint (see :mod:`pbr.textures.mipmap`). t is flipped (image row 0 at t = 1).
+
+    =============  =========  ==========  ================================================
+    name           type       default     meaning
+    =============  =========  ==========  ================================================
+    filename       string     -           the image (or ``data``)
+    data           array      -           an (H, W, C) array (linear values) instead
+    filter         string     'bilinear'  'point', 'bilinear', 'trilinear' or 'ewa'
+    maxanisotropy  float      8           'ewa': longest ratio of the footprint's axes
+    wrap           string     'repeat'    'repeat', 'black' or 'clamp'
+    scale          float      1           factor on the values
+    invert         bool       false       1 - value (after the scale)
+    encoding       string     -           'sRGB' (default for 8-bit files) or 'linear'
+    mapping        string     'uv'        2D mapping (see ``dots``), with ``uscale``,
+                                          ``vscale``, ``udelta``, ``vdelta``, ``v1``,
+                                          ``v2``, ``to_world``
+    =============  =========  ==========  ================================================
+
+    The texels are not differentiable parameters (use Mitsuba's ``bitmap`` for that).
+    """
+    filt = p.string("filter", "bilinear", choices=mipmap.FILTERS)
+    max_aniso = p.float("maxanisotropy", 8.0, min=1.0)
+    wrap = p.string("wrap", "repeat", choices=(*mipmap.WRAPS, "octahedralsphere"))
+    if wrap == "octahedralsphere":
+        raise p.error("wrap", "'octahedralsphere' is not supported (supported: repeat, black, clamp)")
+    scale = p.float("scale", 1.0)
+    invert = p.bool("invert", False)
+    if p.has("data"):
+        rgb = np.asarray(p.raw("data"), dtype=np.float32)
+        if rgb.ndim == 2:
+            rgb = rgb[..., None]
+        if rgb.ndim != 3 or rgb.shape[2] not in (1, 3, 4):
+            raise p.error("data", f"expected an (H, W, 1|3|4) array, got shape {rgb.shape}")
+        eight_bit = False
+    else:
+        fname = loader.resolve_path(p.string("filename"), p.key("filename"))
+        try:
+            rgb = read_image(fname)
+        except Exception as e:  # unreadable file
+            raise p.error("filename", f"cannot read image {fname!r}: {e}") from None
+        eight_bit = os.path.splitext(fname)[1].lower() in (".png", ".jpg", ".jpeg", ".tga", ".bmp")
+    encoding = p.string("encoding", "sRGB" if eight_bit else "linear", choices=("sRGB", "linear"))
+    if eight_bit and encoding == "linear":
+        rgb = linear_to_srgb(rgb).astype(np.float32)   # read_image decoded sRGB: keep the stored values
+    kw = _mapping_2d(p)
+    p.finish()
+    if rgb.ndim == 2:
+        rgb = rgb[..., None]
+    rgb = np.repeat(rgb[..., :1], 3, axis=2) if rgb.shape[2] == 1 else rgb[..., :3]
+    FINITE.check(rgb, p.key("filename" if p.has("filename") else "data"))
+    mapping = procedural.Procedural(p.path + ".mapping", procedural.CHECKER2D, **kw)
+    return loader.textures.add(mipmap.MipMap(p.path, rgb, filt, wrap, max_aniso, scale, invert, form, mapping))
 
 
 @TEXTURE_TYPES.register("scale")
