@@ -26,7 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from .backend import Struct
-from .films import HDRFilm
+from .films import FILMS, HDRFilm
 from .samplers import SAMPLERS, IndependentSampler
 from .sampling import square_to_uniform_disk_concentric
 from .plugins.props import Props
@@ -143,8 +143,8 @@ class ProjectiveCamera:
         self.sampler = IndependentSampler()
         for key, child in props.children():
             t = child["type"]
-            if t == "hdrfilm":
-                self.film = HDRFilm(props.child(key))
+            if t in FILMS:
+                self.film = FILMS[t](props.child(key))
             elif t in SAMPLERS:
                 self.sampler = SAMPLERS[t](props.child(key))
             elif props.loader is not None and props.loader.is_medium(child):
@@ -157,6 +157,7 @@ class ProjectiveCamera:
         self.aspect = w / h
         self.to_world = props.transform("to_world")
         self._shutter(props)
+        self.film.set_exposure(self.shutter_close - self.shutter_open)
         for name in ("to_world", "to_world_end") if self.motion else ("to_world",):
             m = props.transform(name)
             lin = m[:3, :3]

@@ -107,6 +107,7 @@ class LightTracingIntegrator(SamplingIntegrator):
 
     needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
     traces_light_paths = True
+    supports_films = False        # splats RGB (RGB films only)
 
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
         cam, w, h, spp, _, _ = self._plan(scene, sensor, spp)

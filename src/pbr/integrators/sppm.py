@@ -107,6 +107,7 @@ class SPPMIntegrator(SamplingIntegrator):
     """
 
     name = "sppm"
+    supports_films = False        # develops its own channels (RGB films only)
     traces_light_paths = True
     GAMMA = 2.0 / 3.0      # fraction of new photons kept per iteration (Hachisuka & Jensen)
 
