@@ -57,6 +57,7 @@ class HDRFilm:
     # with R, G, B, and the surface channels (gbuffer) the integrator adds.
     xyz_matrix = None
     max_component = math.inf
+    size_keys = ("width", "height", 768, 576)   # the parameters (and defaults) of the image size
     keeps_rgb = True
     surface_channels = ()
 
@@ -176,6 +177,7 @@ class RGBFilm(HDRFilm):
     """
 
     name = "rgb"
+    size_keys = ("xresolution", "yresolution", 1280, 720)
 
     def __init__(self, props: Props):
         self.name = props.type or "rgb"
