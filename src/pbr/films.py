@@ -358,11 +358,11 @@ class SpecFilm(HDRFilm):
             raise props.error(None, "a specfilm needs at least one sensor response function (a nested spectrum)")
         props.finish()
         self.n_extra = len(tables)
-        self._tables = np.stack(tables).astype(np.float32)
+        self._n_tab = len(tables[0])
+        self._tables = mi.Float(np.stack(tables).astype(np.float32).ravel())   # not inside a frozen render
 
     def sample_channels(self, L, wl) -> list:
-        n_tab = self._tables.shape[1]
-        tab = mi.Float(self._tables.ravel())
+        n_tab, tab = self._n_tab, self._tables
         ts = [dr.clip(wl.lambda_[k] - spec.LAMBDA_MIN, 0.0, n_tab - 1.0) for k in range(spec.N_WAVELENGTHS)]
         i0 = [dr.minimum(mi.UInt32(t), n_tab - 2) for t in ts]
         f = [t - mi.Float(i) for t, i in zip(ts, i0)]

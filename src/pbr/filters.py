@@ -212,14 +212,14 @@ class TabulatedFilter(Filter):
         u = np.linspace(0.0, 1.0, self.N_QUANTILES + 1)
         q = np.interp(u, cdf, edges)    # the piecewise-linear CDF's exact inverse
         q[0], q[-1] = -r, r
-        self._quantiles = q.astype(np.float32)
+        self._quantiles = mi.Float(q.astype(np.float32))   # made here: not inside a frozen render
 
     def eval(self, x):
         return dr.select(dr.abs(x) < self.radius, self.profile(x), 0.0)
 
     def sample1(self, u):
         n = self.N_QUANTILES
-        table = mi.Float(self._quantiles)
+        table = self._quantiles
         t = dr.clip(u * n, 0.0, n * (1.0 - 2.0 ** -24))
         i = mi.UInt32(t)
         a = dr.gather(mi.Float, table, i)

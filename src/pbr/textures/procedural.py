@@ -91,7 +91,8 @@ def build_table(items: list) -> ProceduralTable:
         m=[f([t.m[r, c] for t in items]) for r in range(3) for c in range(4)],
         uv=[f([t.uv[k] for t in items]) for k in range(4)],
         v1=[f([t.planar[0][k] for t in items]) for k in range(3)],
-        v2=[f([t.planar[1][k] for t in items]) for k in range(3)], perm=mi.UInt32(NOISE_PERM))
+        v2=[f([t.planar[1][k] for t in items]) for k in range(3)], perm=mi.UInt32(NOISE_PERM),
+        marble=[f([c[k] for c in MARBLE_COLORS]) for k in range(3)])
 
 
 def static_info(items: list):
@@ -292,15 +293,16 @@ def _bezier(t, c0, c1, c2, c3):
     return s * s * s * c0 + 3.0 * s * s * t * c1 + 3.0 * s * t * t * c2 + t * t * t * c3
 
 
-def marble_rgb(perm, p, dpdx, dpdy, omega, octaves, scale, variation, unroll):
-    """pbrt-v4's marble: sin of y perturbed by fbm, through its colour spline (x 1.5)."""
+def marble_rgb(perm, p, dpdx, dpdy, omega, octaves, scale, variation, unroll, table=None):
+    """pbrt-v4's marble: sin of y perturbed by fbm, through its colour spline (x 1.5);
+    ``table``: the spline's control points (3 Floats; made here when not given)."""
     p = p * scale
     m = p.y + variation * fbm(perm, p, dpdx * scale, dpdy * scale, omega, octaves, unroll)
     t = 0.5 + 0.5 * dr.sin(m)
     n_seg = len(MARBLE_COLORS) - 3
     first = dr.minimum(mi.UInt32(dr.floor(t * n_seg)), n_seg - 1)
     t = t * n_seg - mi.Float(first)
-    table = [mi.Float([c[k] for c in MARBLE_COLORS]) for k in range(3)]
+    table = table or [mi.Float([c[k] for c in MARBLE_COLORS]) for k in range(3)]
     return mi.Color3f(*[1.5 * _bezier(t, *[dr.gather(mi.Float, table[k], first + j) for j in range(4)])
                         for k in range(3)])
 
@@ -339,7 +341,7 @@ def evaluate(textures, i, uv, si, lam, active) -> mi.Spectrum:
             value = dr.select(pattern == WINDY, dr.abs(wind) * wave, value)
         if MARBLE in pats:
             rgb = marble_rgb(perm, pt, tx, ty, omega, octaves, dr.gather(mi.Float, T.scale, i, active),
-                             dr.gather(mi.Float, T.variation, i, active), max_octaves)
+                             dr.gather(mi.Float, T.variation, i, active), max_octaves, T.marble)
         if CHECKER3D in pats:
             r = [1.5 * dr.maximum(dr.abs(tx[k]), dr.abs(ty[k])) for k in range(3)]
             w = 0.5 - 0.5 * _checker_bump(pt.x, r[0]) * _checker_bump(pt.y, r[1]) * _checker_bump(pt.z, r[2])

@@ -76,6 +76,7 @@ class ProceduralTable:
     v1: object = None           # planar axes
     v2: object = None
     perm: object = None         # the noise permutation table (512 entries)
+    marble: object = None       # marble's colour spline (3 Floats)
 
 
 @dataclass
