@@ -182,3 +182,66 @@ def test_rotating_camera_interpolates_by_slerp():
                    "film": {"type": "hdrfilm", "width": 8, "height": 8}})
     ray = cam.sample_ray(mi.Point2f([0.5], [0.5]), None, mi.Float([0.5]))
     assert np.allclose(np.array(ray.d).ravel(), [math.sqrt(0.5), 0, math.sqrt(0.5)], atol=1e-5)
+
+
+SINGLET = "# a biconvex singlet (R 50 mm, 5 mm thick, n 1.5), the stop 2 mm behind it\n50 5 1.5 20\n-50 2 1 20\n0 45 0 10\n"
+
+
+def _realistic(tmp_path, film, **kw):
+    lens = tmp_path / "singlet.dat"
+    lens.write_text(SINGLET)
+    return {"type": "realistic", "lensfile": str(lens), "aperturediameter": 10.0,
+            "to_world": mi.ScalarTransform4f().look_at([0, 0, 0], [0, 0, 1], [0, 1, 0]), "film": film, **kw}
+
+
+def test_realistic_camera_focal_length_and_image_position(tmp_path):
+    """The singlet's focal length is the thick-lens formula's, 1/f = (n-1)(1/R1 - 1/R2 +
+    (n-1) d / (n R1 R2)) = 1 / 50.85 mm; a distant light 8 degrees to the camera's left
+    (+x) images left of the centre at f tan(theta) on the film (within 3%: the lens's
+    distortion)."""
+    w, h, dist, th = 64, 48, 100.0, math.radians(8.0)
+    d = _lit_spheres(_realistic(tmp_path, {"type": "rgb", "xresolution": w, "yresolution": h,
+                                           "rfilter": {"type": "box"}}, focusdistance=dist),
+                     [([dist * math.sin(th), 0.0, dist * math.cos(th)], 0.5)])
+    scene = pbr.load_dict(d)
+    cam = scene.sensors[0]
+    n, r1, r2, t = 1.5, 0.05, -0.05, 0.005
+    f = 1.0 / ((n - 1) * (1 / r1 - 1 / r2 + (n - 1) * t / (n * r1 * r2)))
+    assert cam.lens.focal_length == pytest.approx(f, rel=1e-4)
+    img = np.asarray(pbr.render(scene, spp=256, seed=0), np.float64).mean(axis=2)
+    y, x = np.mgrid[0:h, 0:w] + 0.5
+    m0 = img.sum()
+    cx, cy = (img * x).sum() / m0, (img * y).sum() / m0
+    shift = f * math.tan(th) / cam.extent[0] * w
+    assert w / 2 - cx == pytest.approx(shift, rel=0.03) and cy == pytest.approx(h / 2, abs=0.2)
+
+
+def test_realistic_camera_irradiance_on_axis(tmp_path):
+    """Under a uniform sky of radiance 1 (a flat spectrum: Y = 1), the centre pixel holds
+    pbrt-v4's weighted estimate of the integral of cos^4 / z^2 over the exit pupil (the
+    stop, radius a at distance z from the film): pi a^2 / (z^2 + a^2)."""
+    d = {"type": "scene", "integrator": {"type": "path", "max_depth": 1},
+         "cam": _realistic(tmp_path, {"type": "hdrfilm", "width": 9, "height": 9, "rfilter": {"type": "box"}},
+                           focusdistance=5.0),
+         "s": {"type": "sphere", "center": [0, 0, -50], "radius": 0.1},
+         "sky": {"type": "constant", "radiance": {"type": "spectrum", "value": 1.0}}}
+    scene = pbr.load_dict(d)
+    img = np.asarray(pbr.render(scene, spp=16384, seed=1), np.float64)
+    y = 0.2126 * img[4, 4, 0] + 0.7152 * img[4, 4, 1] + 0.0722 * img[4, 4, 2]
+    a, z = 0.005, scene.sensors[0].lens.rear_z
+    assert y == pytest.approx(math.pi * a * a / (z * z + a * a), rel=0.025)   # ~0.7% noise
+    # at the film's centre exactly, the weights' mean is the integral (1M lens samples)
+    u = np.random.default_rng(0).random((2, 1 << 20))
+    _, wt = scene.sensors[0].sample_ray_weighted(mi.Point2f(0.5, 0.5), mi.Point2f(*u))
+    assert float(np.mean(np.array(wt))) == pytest.approx(math.pi * a * a / (z * z + a * a), rel=2e-3)
+    assert img[0, 0].mean() < img[4, 4].mean()              # vignetting and cos^4 toward the corners
+    with pytest.raises(SceneError, match="scene.cam.focusdistance: the focus distance .* too short"):
+        pbr.load_dict({**d, "cam": _realistic(tmp_path, {"type": "hdrfilm"}, focusdistance=0.01)})
+    with pytest.raises(SceneError, match="scene.cam.lensfile: file not found"):
+        pbr.load_dict({**d, "cam": {**d["cam"], "lensfile": str(tmp_path / "missing.dat")}})
+    bad = tmp_path / "bad.dat"
+    bad.write_text("50 5 1.5\n")
+    with pytest.raises(SceneError, match="scene.cam.lensfile: cannot read lens file .* rows of 4 numbers"):
+        pbr.load_dict({**d, "cam": {**d["cam"], "lensfile": str(bad)}})
+    with pytest.raises(SceneError, match="the 'ptracer' integrator"):
+        pbr.load_dict({**d, "integrator": {"type": "ptracer"}})

@@ -58,6 +58,7 @@ class HDRFilm:
     xyz_matrix = None
     max_component = math.inf
     size_keys = ("width", "height", 768, 576)   # the parameters (and defaults) of the image size
+    diagonal = 35.0      # physical film diagonal (mm; pbrt-v4's ``realistic`` camera)
     keeps_rgb = True
     surface_channels = ()
 
@@ -213,7 +214,8 @@ class RGBFilm(HDRFilm):
             raise props.error("cropwindow" if props.has("cropwindow") else "pixelbounds",
                               f"the rendered part of the image is empty ({x0}..{x1} x {y0}..{y1})")
         self.crop_offset, self.crop_size = (x0, y0), (x1 - x0, y1 - y0)
-        props.mark("filename", "diagonal")
+        props.mark("filename")
+        self.diagonal = props.float("diagonal", 35.0, min=1e-6)
         props.bool("savefp16", True)
 
     def _sensor(self, props: Props) -> None:

@@ -117,6 +117,7 @@ class SamplingIntegrator:
     # Records a function's kernels once and replays them (dr.freeze for pbr scenes): set
     # by pbr.freeze, a layer above the integrators; None where pbr.freeze is not loaded.
     recorder = None
+    _ray_weight = None            # the last camera samples' ray weights (None: 1)
     # The count of non-finite samples of the current render (pbr.render sets a fresh one).
     nonfinite = None
 
@@ -141,6 +142,9 @@ class SamplingIntegrator:
             raise SceneError(f"{self.path}: the {self.name!r} integrator develops plain RGB images only; sensor "
                              f"{sensor}'s film ({film.name!r}) has a sensor response or extra channels "
                              f"(use 'hdrfilm' or a default 'rgb' film)")
+        if getattr(cam, "weights_rays", False) and not self.supports_films:
+            raise SceneError(f"{self.path}: the {self.name!r} integrator does not support the "
+                             f"{type(cam).name!r} camera (its rays carry lens weights)")
         self.light_sampler = scene.lights.sampler(self.light_sampler_type)
         if self.traces_light_paths:
             self.emission_sampler = scene.lights.sampler("power")
@@ -206,7 +210,12 @@ class SamplingIntegrator:
         weight = dr.select(inside, weight, 0.0)
         aperture = mi.Point2f(rng.next_float32(), rng.next_float32()) if cam.needs_aperture_sample else None
         time = cam.sample_time(rng.next_float32()) if getattr(cam, "motion", None) is not None else None
-        ray = cam.sample_ray(mi.Point2f(px / w, py / h), aperture, time)
+        if getattr(cam, "weights_rays", False):
+            # A camera whose rays carry a weight (the realistic camera's lens throughput):
+            # it scales the sample's radiance, not the filter weight the film divides by.
+            ray, self._ray_weight = cam.sample_ray_weighted(mi.Point2f(px / w, py / h), aperture, time)
+        else:
+            ray, self._ray_weight = cam.sample_ray(mi.Point2f(px / w, py / h), aperture, time), None
         return rng, wl, ray, weight, inside
 
     # -- rendering ------------------------------------------------------------------------
@@ -224,8 +233,11 @@ class SamplingIntegrator:
         for p in range(n_pass):
             with dr.suspend_grad():
                 rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
+                ray_weight = self._ray_weight
                 out = radiance(rng, ray, wl, inside)
                 L, extra = out if isinstance(out, tuple) else (out, ())
+                if ray_weight is not None:
+                    L = L * ray_weight
                 extra = [*film_channels(scene, cam, rng, ray, wl, L, inside), *extra]
                 xyz = clamp_sample(cam.film, spec.to_xyz(L, wl))
                 xyz, *extra = self.counter().replace([xyz * weight, *extra], inside)
@@ -262,6 +274,9 @@ class SamplingIntegrator:
         if not cam.film.plain:
             raise NotImplementedError(f"{self.name}: reverse-mode derivatives need a plain RGB film ('hdrfilm' or a "
                                       f"default 'rgb'), not {cam.film.name!r}")
+        if getattr(cam, "weights_rays", False):
+            raise NotImplementedError(f"{self.name}: reverse-mode derivatives with a {type(cam).name!r} camera "
+                                      f"(weighted camera rays) are not supported")
         pixel_w = self._pixel_weights(scene, sensor, seed, spp)
         g = grad_img.array if isinstance(grad_img, mi.TensorXf) else mi.Float(np.asarray(grad_img, np.float32).ravel())
         for p in range(n_pass):
