@@ -245,3 +245,44 @@ def test_realistic_camera_irradiance_on_axis(tmp_path):
         pbr.load_dict({**d, "cam": {**d["cam"], "lensfile": str(bad)}})
     with pytest.raises(SceneError, match="the 'ptracer' integrator"):
         pbr.load_dict({**d, "integrator": {"type": "ptracer"}})
+
+
+XML = """<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+    <sensor type="spherical">
+        <string name="mapping" value="equirectangular"/>
+        <film type="specfilm">
+            <integer name="width" value="16"/><integer name="height" value="8"/>
+            <spectrum name="band" value="500:1, 600:1"/>
+            <rfilter type="mitchell"><float name="B" value="0.5"/></rfilter>
+        </film>
+    </sensor>
+    <shape type="sphere">
+        <bsdf type="diffuse">
+            <texture name="reflectance" type="imagemap">
+                <string name="filter" value="ewa"/><string name="filename" value="tex.png"/>
+            </texture>
+        </bsdf>
+        <transform name="to_world"><translate value="0 0 3"/></transform>
+    </shape>
+    <shape type="rectangle">
+        <bsdf type="diffuse">
+            <texture name="reflectance" type="wrinkled"><integer name="octaves" value="4"/></texture>
+        </bsdf>
+        <transform name="to_world"><translate value="0 -1 0"/><rotate x="1" angle="-90"/></transform>
+    </shape>
+    <emitter type="constant"/>
+</scene>
+"""
+
+
+def test_xml_scene_with_the_new_plugins(tmp_path):
+    """Mitsuba XML reaches the new plugins: a spherical camera with a specfilm and a
+    Mitchell filter looking at an EWA imagemap and a wrinkled texture (the spherical
+    camera's footprint: its ray origins are one point)."""
+    pbr.write_image(str(tmp_path / "tex.png"), np.random.default_rng(0).random((32, 32, 3)).astype(np.float32))
+    (tmp_path / "scene.xml").write_text(XML)
+    scene = pbr.load_file(str(tmp_path / "scene.xml"))
+    img = np.asarray(pbr.render(scene, spp=16))
+    assert img.shape == (8, 16, 1) and np.isfinite(img).all() and img.mean() > 0
+    assert scene.sensors[0].film.channel_names() == ["band"]

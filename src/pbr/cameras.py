@@ -241,8 +241,9 @@ class ProjectiveCamera:
             rays = [self.sample_ray(mi.Point2f(pos.x + dx, pos.y + dy), ap, tm)
                     for dx, dy in ((0.0, 0.0), (1.0 / cw, 0.0), (0.0, 1.0 / ch))]
             inv = np.linalg.inv(self.to_world)
-            o = [inv[:3, :3] @ np.array(r.o, np.float64).reshape(3, -1) + inv[:3, 3:] for r in rays]
-            d = [inv[:3, :3] @ np.array(r.d, np.float64).reshape(3, -1) for r in rays]
+            o = [np.broadcast_to(inv[:3, :3] @ np.array(r.o, np.float64).reshape(3, -1) + inv[:3, 3:], (3, n)).copy()
+                 for r in rays]
+            d = [np.broadcast_to(inv[:3, :3] @ np.array(r.d, np.float64).reshape(3, -1), (3, n)).copy() for r in rays]
             d = [x / np.linalg.norm(x, axis=0) for x in d]
             for oi, di in zip(o, d):     # origins back from the near plane to the lens plane z = 0
                 ok = np.abs(di[2]) > 1e-6
