@@ -267,7 +267,8 @@ class ProjectiveCamera:
         """(dp/dx, dp/dy): the change of the surface point ``p`` (normal ``n``, world
         space) under a one-pixel step of the camera ray, estimated from the camera's
         minimum differentials, scaled by max(1/8, 1/sqrt(spp)) (pbrt-v4's
-        ``Approximate_dp_dxy``: no differentials are carried along paths)."""
+        ``Approximate_dp_dxy``: no differentials are carried along paths). A moving camera
+        is taken at its start transform."""
         pdx, pdy, ddx, ddy = self.min_differentials()
         lin, o = self._frame(None)
         inv = np.linalg.inv(np.asarray(self.to_world, np.float64)[:3, :3]).tolist()
@@ -683,8 +684,6 @@ class RealisticCamera(ProjectiveCamera):
             rows = read_lens_file(path)
         except (OSError, ValueError) as e:
             raise props.error("lensfile", f"cannot read lens file {path!r}: {e}") from None
-        if not np.any(rows[:, 0] == 0.0):
-            pass   # no stop: the elements' own apertures limit the rays
         aperture = props.float("aperturediameter", 1.0, min=1e-6)
         focus = props.float("focusdistance", 10.0, min=1e-6)
         self.diagonal = float(getattr(self.film, "diagonal", 35.0)) / 1000.0
