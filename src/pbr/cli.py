@@ -66,14 +66,15 @@ def _film_size(args):
             if not films:
                 films = [sensor.setdefault("film", {"type": "hdrfilm"})]
             for film in films:
-                w, h = int(film.get("width", 768)), int(film.get("height", 576))
+                kw, kh, dw, dh = FILMS[film["type"]].size_keys     # pbrt-v4's films: xresolution, ...
+                w, h = int(film.get(kw, dw)), int(film.get(kh, dh))
                 width = args.res if args.res is not None else args.width
                 if width is not None and args.height is not None:
-                    film["width"], film["height"] = width, args.height
+                    film[kw], film[kh] = width, args.height
                 elif width is not None:
-                    film["width"], film["height"] = width, max(1, round(width * h / w))
+                    film[kw], film[kh] = width, max(1, round(width * h / w))
                 else:
-                    film["width"], film["height"] = max(1, round(args.height * w / h)), args.height
+                    film[kw], film[kh] = max(1, round(args.height * w / h)), args.height
     return edit
 
 

@@ -8,9 +8,9 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from ..bsdfs.base import ShadingContext
 from .. import spectrum as spec
 from .base import INTEGRATORS, PRIMAL, NestingIntegrator, nested_integrators
+from .surface import surface_channels
 
 # AOV type -> channel suffixes (Mitsuba's aov.cpp).
 AOV_TYPES = {
@@ -36,6 +36,7 @@ class AOVIntegrator(NestingIntegrator):
     """
 
     name = "aov"
+    supports_films = False        # develops its own channels (RGB films only)
     light_sampler_type = "uniform"   # the AOVs sample no light; nested integrators use their own
 
     def __init__(self, props):
@@ -80,36 +81,4 @@ class AOVIntegrator(NestingIntegrator):
 
     def sample_aovs(self, scene, rng, ray, wl, active):
         """Per-sample AOV channels (list of ``mi.Float``) of the surface ``ray`` sees."""
-        si, shape = scene.geometry.intersect(ray, active)
-        hit = active & si.is_valid()
-        bsdfs = scene.bsdfs
-        bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
-        ctx = ShadingContext(si, wl)
-        out = []
-        for _, kind in self.aovs:
-            if kind == "depth":
-                v = [si.t]
-            elif kind == "position":
-                v = list(si.p)
-            elif kind == "uv":
-                v = list(si.uv)
-            elif kind == "geo_normal":
-                v = list(si.n)
-            elif kind == "sh_normal":
-                v = list(bsdfs.shading_normal(bsdf_id, ctx, hit))
-            elif kind == "dp_du":
-                v = list(si.dp_du)
-            elif kind == "dp_dv":
-                v = list(si.dp_dv)
-            elif kind == "prim_index":
-                v = [mi.Float(si.prim_index)]
-            elif kind == "shape_index":
-                v = [mi.Float(shape + 1)]
-            else:   # albedo
-                u1 = rng.next_float32()
-                u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
-                bs = bsdfs.sample(bsdf_id, ctx, u1, u2, hit)
-                rho = dr.select(bs.pdf > 0, bs.weight, 0.0)
-                v = list(spec.xyz_to_srgb(spec.to_xyz(rho, wl)))
-            out += [dr.select(hit, mi.Float(c), 0.0) for c in v]
-        return out
+        return surface_channels(scene, rng, ray, wl, [kind for _, kind in self.aovs], active)

@@ -34,6 +34,7 @@ from ..lights import LIGHT_TYPES
 from ..plugins.props import SceneError
 from ..plugins.registry import Registry
 from ..spectrum import SampledWavelengths
+from .surface import surface_channels
 
 PRIMAL, FORWARD, BACKWARD = "primal", "forward", "backward"
 NONFINITE_POLICIES = ("warn", "raise", "ignore")
@@ -137,9 +138,11 @@ class SamplingIntegrator:
     surfaces_only = False         # whether participating media are an error
     traces_light_paths = False    # whether every emitter must emit rays (sample_Le), without media
     needs_pinhole = False         # whether paths connect to the camera (a 'perspective' camera only)
+    supports_films = True         # whether non-RGB films (sensor matrix, extra channels) develop right
     # Records a function's kernels once and replays them (dr.freeze for pbr scenes): set
     # by pbr.freeze, a layer above the integrators; None where pbr.freeze is not loaded.
     recorder = None
+    _ray_weight = None            # the last camera samples' ray weights (None: 1)
     # The count of non-finite samples of the current render (pbr.render sets a fresh one).
     nonfinite = None
     # Whether render() is the film of independent camera-sample passes (_film), so that
@@ -159,9 +162,19 @@ class SamplingIntegrator:
         scene's current lights (cached per scene build by ``LightSet.sampler``)."""
         self.check(scene)
         cam = scene.sensors[sensor] if 0 <= sensor < len(scene.sensors) else None
-        if self.needs_pinhole and cam is not None and type(cam).name != "perspective":
+        if self.needs_pinhole and cam is not None and not getattr(cam, "pinhole", False):
+            name = type(cam).name
+            what = repr(name) if name != "perspective" else "a 'perspective' camera with a lens or motion"
             raise SceneError(f"{self.path}: the {self.name!r} integrator connects paths to the camera, which needs "
-                             f"a 'perspective' camera (sensor {sensor} is {type(cam).name!r})")
+                             f"a 'perspective' camera (sensor {sensor} is {what}), static and without a lens")
+        film = getattr(cam, "film", None)
+        if film is not None and not film.plain and not self.supports_films:
+            raise SceneError(f"{self.path}: the {self.name!r} integrator develops plain RGB images only; sensor "
+                             f"{sensor}'s film ({film.name!r}) has a sensor response or extra channels "
+                             f"(use 'hdrfilm' or a default 'rgb' film)")
+        if getattr(cam, "weights_rays", False) and not self.supports_films:
+            raise SceneError(f"{self.path}: the {self.name!r} integrator does not support the "
+                             f"{type(cam).name!r} camera (its rays carry lens weights)")
         self.light_sampler = scene.lights.sampler(self.light_sampler_type)
         if self.traces_light_paths:
             self.emission_sampler = scene.lights.sampler("power")
@@ -219,6 +232,12 @@ class SamplingIntegrator:
             while spp % per_pass:
                 per_pass -= 1
         memory.check_render(w, h, per_pass, 4, f"sensor {sensor}")
+        textures = getattr(scene, "textures", None)
+        if textures is not None and textures.needs_footprint and hasattr(cam, "approximate_dp_dxy"):
+            # Procedural and MIP-mapped textures filter over this camera's pixel footprint
+            # (its minimum ray differentials are found here, outside the render kernels).
+            cam.min_differentials()
+            textures.footprint = (cam, spp)
         return cam, w, h, spp, per_pass, spp // per_pass
 
     def _camera_samples(self, cam, w, h, spp, per_pass, pass_index, seed):
@@ -237,7 +256,13 @@ class SamplingIntegrator:
         inside = (px >= 0) & (px < w) & (py >= 0) & (py < h)
         weight = dr.select(inside, weight, 0.0)
         aperture = mi.Point2f(rng.next_float32(), rng.next_float32()) if cam.needs_aperture_sample else None
-        ray = cam.sample_ray(mi.Point2f(px / w, py / h), aperture)
+        time = cam.sample_time(rng.next_float32()) if getattr(cam, "motion", None) is not None else None
+        if getattr(cam, "weights_rays", False):
+            # A camera whose rays carry a weight (the realistic camera's lens throughput):
+            # it scales the sample's radiance, not the filter weight the film divides by.
+            ray, self._ray_weight = cam.sample_ray_weighted(mi.Point2f(px / w, py / h), aperture, time)
+        else:
+            ray, self._ray_weight = cam.sample_ray(mi.Point2f(px / w, py / h), aperture, time), None
         return rng, wl, ray, weight, inside
 
     # -- rendering ------------------------------------------------------------------------
@@ -260,9 +285,14 @@ class SamplingIntegrator:
                     s = mi.Float(job.given[p])
                 else:
                     rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
+                    ray_weight = self._ray_weight
                     out = radiance(rng, ray, wl, inside)
                     L, extra = out if isinstance(out, tuple) else (out, ())
-                    xyz, *extra = self.counter().replace([spec.to_xyz(L, wl) * weight, *extra], inside)
+                    if ray_weight is not None:
+                        L = L * ray_weight
+                    extra = [*film_channels(scene, cam, rng, ray, wl, L, inside), *extra]
+                    xyz = clamp_sample(cam.film, spec.to_xyz(L, wl))
+                    xyz, *extra = self.counter().replace([xyz * weight, *extra], inside)
                     extra = [c * weight for c in extra]
                     s = _pixel_sums([*xyz, weight, *extra], w * h, per_pass)
                     if job is not None:
@@ -274,7 +304,7 @@ class SamplingIntegrator:
                 bar.update(1)
         if bar:
             bar.close()
-        return _develop(sums, w, h)
+        return _develop(sums, w, h, cam.film)
 
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
         """Primal image: ``mi.TensorXf`` (H, W, 3), linear sRGB."""
@@ -295,6 +325,12 @@ class SamplingIntegrator:
         self._require_differentiable()
         self.prepare(scene, sensor)
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
+        if not cam.film.plain:
+            raise NotImplementedError(f"{self.name}: reverse-mode derivatives need a plain RGB film ('hdrfilm' or a "
+                                      f"default 'rgb'), not {cam.film.name!r}")
+        if getattr(cam, "weights_rays", False):
+            raise NotImplementedError(f"{self.name}: reverse-mode derivatives with a {type(cam).name!r} camera "
+                                      f"(weighted camera rays) are not supported")
         pixel_w = self._pixel_weights(scene, sensor, seed, spp)
         g = grad_img.array if isinstance(grad_img, mi.TensorXf) else mi.Float(np.asarray(grad_img, np.float32).ravel())
         for p in range(n_pass):
@@ -393,15 +429,55 @@ def _pixel_sums(channels, n_pixels, per_pass):
     return acc
 
 
-def _develop(sums, w, h):
+def film_channels(scene, cam, rng, ray, wl, L, active) -> list:
+    """The film's own per-sample channels: spectral ones (``spectral``, ``specfilm``) and
+    the surface channels of a ``gbuffer`` (camera space unless it asks for world space)."""
+    film = cam.film
+    out = film.sample_channels(L, wl)
+    if film.surface_channels:
+        frame = None
+        if not getattr(film, "world_space", False):
+            inv = np.linalg.inv(np.asarray(cam.to_world, np.float64))
+            m = inv.tolist()
+            nm = np.asarray(cam.to_world, np.float64)[:3, :3].T.tolist()   # normals: inverse transpose
+
+            def frame(v, point):
+                a = m if point else nm
+                r = [a[k][0] * v[0] + a[k][1] * v[1] + a[k][2] * v[2] + (m[k][3] if point else 0.0)
+                     for k in range(3)]
+                return mi.Point3f(*r) if point else dr.normalize(mi.Vector3f(*r))
+        out += surface_channels(scene, rng, ray, wl, film.surface_channels, active, frame)
+    return out
+
+
+def clamp_sample(film, xyz):
+    """A sample's XYZ scaled down so that its sensor RGB's largest component is at most
+    the film's ``max_component`` (pbrt-v4's maxcomponentvalue)."""
+    if not np.isfinite(film.max_component):
+        return xyz
+    m = film.xyz_matrix
+    v = xyz if m is None else mi.Array3f(*[sum(float(m[r][c]) * xyz[c] for c in range(3)) for r in range(3)])
+    rgb = spec.xyz_to_srgb(v)
+    top = dr.maximum(dr.maximum(rgb[0], rgb[1]), rgb[2])
+    return xyz * dr.select(top > film.max_component, film.max_component / dr.maximum(top, 1e-30), 1.0)
+
+
+def _develop(sums, w, h, film=None):
     """The film's image from per-pixel sums (w X, w Y, w Z, w, then weighted extra
-    channels): XYZ / w converted to linear sRGB, extra channels / w appended. Stays on
-    the device (no host round trip), so a whole render can be recorded by ``dr.freeze``."""
+    channels): XYZ / w through the film's sensor matrix, converted to linear sRGB (left
+    out by films without RGB), extra channels / w appended. Stays on the device (no host
+    round trip), so a whole render can be recorded by ``dr.freeze``."""
     n_ch = dr.width(sums) // (w * h)
     pixel = dr.arange(mi.UInt32, w * h)
     ch = [dr.gather(mi.Float, sums, pixel * n_ch + k) for k in range(n_ch)]
     inv_w = dr.rcp(dr.maximum(ch[3], 1e-30))
-    out = [*spec.xyz_to_srgb(mi.Array3f(ch[0], ch[1], ch[2]) * inv_w)] + [c * inv_w for c in ch[4:]]
+    xyz = mi.Array3f(ch[0], ch[1], ch[2]) * inv_w
+    m = getattr(film, "xyz_matrix", None)
+    if m is not None:
+        m = np.asarray(m, np.float64).tolist()
+        xyz = mi.Array3f(*[m[r][0] * xyz[0] + m[r][1] * xyz[1] + m[r][2] * xyz[2] for r in range(3)])
+    rgb = [*spec.xyz_to_srgb(xyz)] if getattr(film, "keeps_rgb", True) else []
+    out = rgb + [c * inv_w for c in ch[4:]]
     img = dr.zeros(mi.Float, w * h * len(out))
     for k, v in enumerate(out):
         dr.scatter(img, v, pixel * len(out) + k)

@@ -69,26 +69,27 @@ class SplatFilm:
 
     def splat_xyz(self, pos, xyz, active):
         w, h = self.width, self.height
-        r = float(self.rfilter.radius)
+        fx, fy = self.rfilter, self.rfilter.y
+        r = max(float(fx.radius), float(fy.radius))
         # Pixel i covers [i, i + 1): its centre is at i + 1/2.
         cx, cy = pos.x * w - 0.5, pos.y * h - 0.5
         x0, y0 = dr.ceil(cx - r), dr.ceil(cy - r)
         n = max(1, int(math.ceil(2.0 * r)))
-        wx = [self.rfilter.eval(x0 + i - cx) for i in range(n)]
-        wy = [self.rfilter.eval(y0 + j - cy) for j in range(n)]
+        wx = [fx.eval(x0 + i - cx) for i in range(n)]
+        wy = [fy.eval(y0 + j - cy) for j in range(n)]
         sx, sy = wx[0], wy[0]
         for i in range(1, n):
             sx, sy = sx + wx[i], sy + wy[i]
         norm = sx * sy
-        active = active & (norm > 0)
+        active = active & (norm != 0)
         inv = dr.select(active, dr.rcp(norm), 0.0)
         ix0, iy0 = mi.Int32(x0), mi.Int32(y0)
         for j in range(n):
             iy = iy0 + j
-            ok_y = active & (iy >= 0) & (iy < h) & (wy[j] > 0)
+            ok_y = active & (iy >= 0) & (iy < h) & (wy[j] != 0)
             for i in range(n):
                 ix = ix0 + i
-                ok = ok_y & (ix >= 0) & (ix < w) & (wx[i] > 0)
+                ok = ok_y & (ix >= 0) & (ix < w) & (wx[i] != 0)
                 wgt = wx[i] * wy[j] * inv
                 idx = mi.UInt32(iy * w + ix) * 3
                 for c in range(3):
@@ -108,6 +109,7 @@ class LightTracingIntegrator(SamplingIntegrator):
 
     needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
     traces_light_paths = True
+    supports_films = False        # splats RGB (RGB films only)
 
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
         cam, w, h, spp, _, _ = self._plan(scene, sensor, spp)

@@ -175,6 +175,7 @@ class MLTIntegrator(SamplingIntegrator):
 
     needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
     name = "mlt"
+    supports_films = False        # develops its own channels (RGB films only)
     traces_light_paths = True
     light_sampler_type = "power"    # next-event estimation, as bdpt
 

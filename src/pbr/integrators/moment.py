@@ -46,6 +46,7 @@ class MomentIntegrator(NestingIntegrator):
     """
 
     name = "moment"
+    supports_films = False        # develops its own channels (RGB films only)
     light_sampler_type = "uniform"   # the moments sample no light; nested integrators use their own
 
     def __init__(self, props):

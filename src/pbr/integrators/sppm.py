@@ -109,6 +109,7 @@ class SPPMIntegrator(SamplingIntegrator):
     pass_separable = False    # pixel statistics carry over between iterations
 
     name = "sppm"
+    supports_films = False        # develops its own channels (RGB films only)
     traces_light_paths = True
     GAMMA = 2.0 / 3.0      # fraction of new photons kept per iteration (Hachisuka & Jensen)
 

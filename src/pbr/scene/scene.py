@@ -80,6 +80,10 @@ class Scene:
         self.media.build(self.textures)
         self.lights.build(self)
         own_table_memory(self)
+        if self.textures.needs_footprint:   # textures filter over the cameras' pixel footprints:
+            for cam in self.sensors:         # find their ray differentials now, not in a render
+                if hasattr(cam, "min_differentials"):
+                    cam.min_differentials()
         self.integrator.prepare(self)
 
     @property

@@ -27,7 +27,7 @@ from ..image import linear_to_srgb, read_image
 from ..plugins.params import check_params
 from ..plugins.props import ALBEDO, FINITE, RADIANCE, UNIT, Props, Range, SceneError, did_you_mean
 from ..plugins.registry import Registry
-from . import meshattr
+from . import meshattr, mipmap, procedural
 from .kinds import (BASE_ONE, BASE_SIGMOID, BASE_TABLE, CONSTANT, OP_CHECKER, OP_MIX, OP_SCALE, TAB_N, Bitmap,
                     Checkerboard, Composite, ConstantSpectrum, MeshAttribute)
 
@@ -264,22 +264,47 @@ def _uniform(loader, p, form, emitter, unbounded):
 
 # -------------------------------------------------------------- spatially varying
 
+_PBRT_CHECKER_KEYS = ("tex1", "tex2", "dimension", "mapping", "uscale", "vscale", "udelta", "vdelta", "v1", "v2",
+                      "to_world")
+
+
 @TEXTURE_TYPES.register("checkerboard")
 def _checkerboard(loader, p, form, emitter, unbounded, scalar=False):
-    """``checkerboard`` (Mitsuba's): two colours alternating on the unit squares of uv.
+    """``checkerboard``: Mitsuba's (``color0``/``color1``: two colours alternating on the
+    unit squares of uv), or pbrt-v4's (``tex1``/``tex2``, a 2D pattern over a mapping or
+    a 3D one, box-filtered over the pixel footprint): the parameters tell which.
 
-    ======  =========  ========  ============================
-    name    type       default   meaning
-    ======  =========  ========  ============================
-    color0  texture    0.4       colour of the even squares
-    color1  texture    0.2       colour of the odd squares
-    to_uv   transform  identity  texture-coordinate transform
-    ======  =========  ========  ============================
+    ==========  =========  ========  ===================================================
+    name        type       default   meaning
+    ==========  =========  ========  ===================================================
+    color0      texture    0.4       Mitsuba's: colour of the even squares
+    color1      texture    0.2       Mitsuba's: colour of the odd squares
+    to_uv       transform  identity  Mitsuba's: texture-coordinate transform
+    tex1        texture    1         pbrt-v4's: where floor(s) + floor(t) (+ floor(z))
+                                     is even
+    tex2        texture    0         pbrt-v4's: on the other squares
+    dimension   int        2         pbrt-v4's: 2 (over a 2D mapping) or 3 (over
+                                     texture space)
+    mapping     string     'uv'      pbrt-v4's 2D mapping (see ``dots``) and its
+                                     ``uscale``, ``vscale``, ``udelta``, ``vdelta``,
+                                     ``v1``, ``v2``, ``to_world``
+    ==========  =========  ========  ===================================================
 
-    The even squares are those where frac(u) > 1/2 and frac(v) > 1/2 agree. As in
-    Mitsuba, a checkerboard given to a float parameter (read with ``eval_1``: roughness,
-    blend weights, opacity, principled lobe weights) has ``color0`` on the odd squares.
+    Mitsuba's even squares are those where frac(u) > 1/2 and frac(v) > 1/2 agree. As in
+    Mitsuba, its checkerboard given to a float parameter (read with ``eval_1``:
+    roughness, blend weights, opacity, principled lobe weights) has ``color0`` on the odd
+    squares.
     """
+    if any(p.has(k) for k in _PBRT_CHECKER_KEYS):
+        for k in ("color0", "color1", "to_uv"):
+            if p.has(k):
+                raise p.error(k, "Mitsuba's checkerboard parameter mixed with pbrt-v4's (tex1, tex2, dimension, "
+                                 "mapping, ...): use one or the other")
+        dim = p.int("dimension", 2)
+        if dim not in (2, 3):
+            raise p.error("dimension", f"expected 2 or 3, got {dim}")
+        pattern = procedural.CHECKER2D if dim == 2 else procedural.CHECKER3D
+        return _pbrt_blend(loader, p, form, emitter, unbounded, pattern, ("tex1", 1.0), ("tex2", 0.0), dim == 2)
     textures = loader.textures
     keys = ("color1", "color0") if scalar else ("color0", "color1")
     c0 = load_spectrum(loader, p.raw(keys[0], {"color0": 0.4, "color1": 0.2}[keys[0]]), p.key(keys[0]), emitter,
@@ -291,6 +316,205 @@ def _checkerboard(loader, p, form, emitter, unbounded, scalar=False):
     if textures.kind_of(c0) == CONSTANT and textures.kind_of(c1) == CONSTANT:
         return textures.add(Checkerboard(p.path, c0, c1, to_uv))
     return textures.add(Composite(p.path, OP_CHECKER, c0, c1, to_uv=to_uv))   # textured colours: a combinator
+
+
+# ------------------------------------------------ pbrt-v4's procedural textures
+
+def _texture_space(p) -> np.ndarray:
+    """texture-from-world: the inverse of ``to_world`` (texture -> world)."""
+    m = p.transform("to_world")
+    try:
+        return np.linalg.inv(m)
+    except np.linalg.LinAlgError:
+        raise p.error("to_world", "the texture transform is singular") from None
+
+
+def _mapping_2d(p) -> dict:
+    """pbrt-v4's 2D mapping parameters -> :class:`~.procedural.Procedural` keywords."""
+    name = p.string("mapping", "uv", choices=tuple(procedural.MAPPINGS))
+    kw = {"mapping": procedural.MAPPINGS[name], "texture_from_world": _texture_space(p)}
+    if name == "uv":
+        kw["uv"] = (p.float("uscale", 1.0), p.float("vscale", 1.0), p.float("udelta", 0.0), p.float("vdelta", 0.0))
+    elif name == "planar":
+        kw["uv"] = (1.0, 1.0, p.float("udelta", 0.0), p.float("vdelta", 0.0))
+        kw["planar"] = (p.vector3("v1", [1.0, 0.0, 0.0]), p.vector3("v2", [0.0, 1.0, 0.0]))
+    return kw
+
+
+def _pbrt_blend(loader, p, form, emitter, unbounded, pattern, a, b, two_d):
+    """A pattern blending two child textures: ``mix`` (x = ``a``, y = ``b``) whose amount
+    is the pattern's weight (a procedural slot)."""
+    x = load_spectrum(loader, p.raw(a[0], a[1]), p.key(a[0]), emitter, unbounded)
+    y = load_spectrum(loader, p.raw(b[0], b[1]), p.key(b[0]), emitter, unbounded)
+    kw = _mapping_2d(p) if two_d else {"mapping": procedural.MAP_UV, "texture_from_world": _texture_space(p)}
+    p.finish()
+    m = loader.textures.add(procedural.Procedural(p.path + ".pattern", pattern, **kw))
+    return loader.textures.add(Composite(p.path, OP_MIX, x, y, m))
+
+
+def _noise_params(p, octaves=True):
+    kw = {"mapping": procedural.MAP_UV, "texture_from_world": _texture_space(p)}
+    if octaves:
+        kw["octaves"] = p.int("octaves", 8, min=0)
+        if kw["octaves"] > 30:
+            raise p.error("octaves", f"at most 30 octaves, got {kw['octaves']}")
+        kw["omega"] = p.float("roughness", 0.5)
+    return kw
+
+
+@TEXTURE_TYPES.register("fbm")
+def _fbm(loader, p, form, emitter, unbounded):
+    """``fbm`` (pbrt-v4's): fractional Brownian motion, sum of octaves of Perlin noise
+    (values around [-1, 1]; the same at every wavelength), up to the pixel footprint's
+    frequency.
+
+    =========  =========  ========  ===============================================
+    name       type       default   meaning
+    =========  =========  ========  ===============================================
+    octaves    int        8         most octaves
+    roughness  float      0.5       amplitude factor per octave (omega)
+    to_world   transform  identity  texture space -> world (points use its inverse)
+    =========  =========  ========  ===============================================
+    """
+    kw = _noise_params(p)
+    p.finish()
+    return loader.textures.add(procedural.Procedural(p.path, procedural.FBM, **kw))
+
+
+@TEXTURE_TYPES.register("wrinkled")
+def _wrinkled(loader, p, form, emitter, unbounded):
+    """``wrinkled`` (pbrt-v4's): turbulence, the sum of octaves of |noise| (octaves past
+    the pixel footprint count their mean, 0.2).
+
+    =========  =========  ========  ===============================================
+    name       type       default   meaning
+    =========  =========  ========  ===============================================
+    octaves    int        8         most octaves
+    roughness  float      0.5       amplitude factor per octave (omega)
+    to_world   transform  identity  texture space -> world (points use its inverse)
+    =========  =========  ========  ===============================================
+    """
+    kw = _noise_params(p)
+    p.finish()
+    return loader.textures.add(procedural.Procedural(p.path, procedural.WRINKLED, **kw))
+
+
+@TEXTURE_TYPES.register("windy")
+def _windy(loader, p, form, emitter, unbounded):
+    """``windy`` (pbrt-v4's): |fbm(p / 10, 3 octaves)| * fbm(p, 6 octaves), waves on water.
+
+    ========  =========  ========  ===============================================
+    name      type       default   meaning
+    ========  =========  ========  ===============================================
+    to_world  transform  identity  texture space -> world (points use its inverse)
+    ========  =========  ========  ===============================================
+    """
+    kw = _noise_params(p, octaves=False)
+    p.finish()
+    return loader.textures.add(procedural.Procedural(p.path, procedural.WINDY, **kw))
+
+
+@TEXTURE_TYPES.register("marble")
+def _marble(loader, p, form, emitter, unbounded):
+    """``marble`` (pbrt-v4's): sin(y + variation fbm) through pbrt-v4's colour spline,
+    an sRGB albedo.
+
+    =========  =========  ========  ===============================================
+    name       type       default   meaning
+    =========  =========  ========  ===============================================
+    octaves    int        8         most octaves of the fbm
+    roughness  float      0.5       amplitude factor per octave (omega)
+    scale      float      1         frequency of the pattern (points times scale)
+    variation  float      0.2       strength of the fbm perturbation
+    to_world   transform  identity  texture space -> world (points use its inverse)
+    =========  =========  ========  ===============================================
+    """
+    kw = _noise_params(p)
+    kw["scale"] = p.float("scale", 1.0)
+    kw["variation"] = p.float("variation", 0.2)
+    p.finish()
+    return loader.textures.add(procedural.Procedural(p.path, procedural.MARBLE, **kw))
+
+
+@TEXTURE_TYPES.register("dots")
+def _dots(loader, p, form, emitter, unbounded):
+    """``dots`` (pbrt-v4's): polka dots (radius 0.35, randomly placed in the unit cells
+    of the 2D mapping where noise > 0).
+
+    ========  =========  =========  =================================================
+    name      type       default    meaning
+    ========  =========  =========  =================================================
+    inside    texture    1          inside the dots
+    outside   texture    0          elsewhere
+    mapping   string     'uv'       'uv', 'spherical', 'cylindrical' or 'planar'
+    uscale    float      1          'uv': s = uscale u + udelta
+    vscale    float      1          'uv': t = vscale v + vdelta
+    udelta    float      0          'uv' and 'planar': offset of s
+    vdelta    float      0          'uv' and 'planar': offset of t
+    v1        vector     (1, 0, 0)  'planar': s axis
+    v2        vector     (0, 1, 0)  'planar': t axis
+    to_world  transform  identity   texture space -> world ('spherical',
+                                    'cylindrical', 'planar' use its inverse)
+    ========  =========  =========  =================================================
+    """
+    return _pbrt_blend(loader, p, form, emitter, unbounded, procedural.DOTS, ("inside", 1.0), ("outside", 0.0), True)
+
+
+@TEXTURE_TYPES.register("imagemap")
+def _imagemap(loader, p, form, emitter, unbounded):
+    """``imagemap`` (pbrt-v4's): an image with a MIP pyramid, filtered over the pixel
+    footprint (see :mod:`pbr.textures.mipmap`). t is flipped (image row 0 at t = 1).
+
+    =============  =========  ==========  ================================================
+    name           type       default     meaning
+    =============  =========  ==========  ================================================
+    filename       string     -           the image (or ``data``)
+    data           array      -           an (H, W, C) array (linear values) instead
+    filter         string     'bilinear'  'point', 'bilinear', 'trilinear' or 'ewa'
+    maxanisotropy  float      8           'ewa': longest ratio of the footprint's axes
+    wrap           string     'repeat'    'repeat', 'black' or 'clamp'
+    scale          float      1           factor on the values
+    invert         bool       false       1 - value (after the scale)
+    encoding       string     -           'sRGB' (default for 8-bit files) or 'linear'
+    mapping        string     'uv'        2D mapping (see ``dots``), with ``uscale``,
+                                          ``vscale``, ``udelta``, ``vdelta``, ``v1``,
+                                          ``v2``, ``to_world``
+    =============  =========  ==========  ================================================
+
+    The texels are not differentiable parameters (use Mitsuba's ``bitmap`` for that).
+    """
+    filt = p.string("filter", "bilinear", choices=mipmap.FILTERS)
+    max_aniso = p.float("maxanisotropy", 8.0, min=1.0)
+    wrap = p.string("wrap", "repeat", choices=(*mipmap.WRAPS, "octahedralsphere"))
+    if wrap == "octahedralsphere":
+        raise p.error("wrap", "'octahedralsphere' is not supported (supported: repeat, black, clamp)")
+    scale = p.float("scale", 1.0)
+    invert = p.bool("invert", False)
+    if p.has("data"):
+        rgb = np.asarray(p.raw("data"), dtype=np.float32)
+        if rgb.ndim == 2:
+            rgb = rgb[..., None]
+        if rgb.ndim != 3 or rgb.shape[2] not in (1, 3, 4):
+            raise p.error("data", f"expected an (H, W, 1|3|4) array, got shape {rgb.shape}")
+        eight_bit = False
+    else:
+        fname = loader.resolve_path(p.string("filename"), p.key("filename"))
+        try:
+            rgb = read_image(fname)
+        except Exception as e:  # unreadable file
+            raise p.error("filename", f"cannot read image {fname!r}: {e}") from None
+        eight_bit = os.path.splitext(fname)[1].lower() in (".png", ".jpg", ".jpeg", ".tga", ".bmp")
+    encoding = p.string("encoding", "sRGB" if eight_bit else "linear", choices=("sRGB", "linear"))
+    if eight_bit and encoding == "linear":
+        rgb = linear_to_srgb(rgb).astype(np.float32)   # read_image decoded sRGB: keep the stored values
+    kw = _mapping_2d(p)
+    p.finish()
+    if rgb.ndim == 2:
+        rgb = rgb[..., None]
+    rgb = np.repeat(rgb[..., :1], 3, axis=2) if rgb.shape[2] == 1 else rgb[..., :3]
+    FINITE.check(rgb, p.key("filename" if p.has("filename") else "data"))
+    mapping = procedural.Procedural(p.path + ".mapping", procedural.CHECKER2D, **kw)
+    return loader.textures.add(mipmap.MipMap(p.path, rgb, filt, wrap, max_aniso, scale, invert, form, mapping))
 
 
 @TEXTURE_TYPES.register("scale")

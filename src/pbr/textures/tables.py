@@ -64,6 +64,39 @@ class MeshAttributeTable:
 
 
 @dataclass
+class ProceduralTable:
+    pattern: object = None      # pattern id (procedural.FBM, ...)
+    mapping: object = None      # 2D mapping id (procedural.MAP_UV, ...)
+    octaves: object = None
+    omega: object = None        # pbrt-v4's 'roughness'
+    scale: object = None
+    variation: object = None
+    m: object = None            # texture-from-world, 12 rows (3x4)
+    uv: object = None           # su, sv, du, dv (planar: du, dv)
+    v1: object = None           # planar axes
+    v2: object = None
+    perm: object = None         # the noise permutation table (512 entries)
+    marble: object = None       # marble's colour spline (3 Floats)
+
+
+@dataclass
+class MipmapTable:
+    texel: object = None        # RGB texels of every level of every image (Array3f)
+    level_offset: object = None  # per (image, level): first texel
+    level_size: object = None   # per (image, level): (width, height)
+    first_level: object = None  # per image: index of its level 0 in level_offset
+    n_levels: object = None
+    filter: object = None       # 0 point, 1 bilinear, 2 trilinear, 3 ewa
+    wrap: object = None         # 0 repeat, 1 black, 2 clamp, 3 octahedralsphere (as repeat)
+    max_aniso: object = None
+    scale: object = None
+    invert: object = None
+    form: object = None         # 0 albedo, 1 unbounded, 2 illuminant
+    mapping: object = None      # a ProceduralTable of the mappings (mapping, m, uv, v1, v2)
+    ewa_lut: object = None      # pbrt-v4's Gaussian filter weights
+
+
+@dataclass
 class TextureTables:
     slot_kind: object = None    # slot -> kind
     slot_index: object = None   # slot -> index within its kind's table
@@ -72,3 +105,5 @@ class TextureTables:
     bitmaps: BitmapTable | None = None
     composites: CompositeTable | None = None
     mesh_attributes: MeshAttributeTable | None = None
+    procedurals: ProceduralTable | None = None
+    mipmaps: MipmapTable | None = None

@@ -18,10 +18,10 @@ import numpy as np
 
 from .. import dispatch
 from .. import spectrum as spec
-from . import meshattr
-from .kinds import (BASE_SIGMOID, BASE_TABLE, BITMAP, CHECKERBOARD, COMPOSITE, CONSTANT, MESH_ATTRIBUTE,
-                    OP_CHECKER, OP_MIX, OP_SCALE, TAB_N, Bitmap, Checkerboard, Composite, ConstantSpectrum,
-                    MeshAttribute)
+from . import meshattr, mipmap, procedural
+from .kinds import (BASE_SIGMOID, BASE_TABLE, BITMAP, CHECKERBOARD, COMPOSITE, CONSTANT, MESH_ATTRIBUTE, MIPMAP,
+                    OP_CHECKER, OP_MIX, OP_SCALE, PROCEDURAL, TAB_N, Bitmap, Checkerboard, Composite,
+                    ConstantSpectrum, MeshAttribute)
 from .tables import BitmapTable, CheckerTable, CompositeTable, ConstantTable, TextureTables
 
 
@@ -35,6 +35,11 @@ class TextureSet:
         self.bitmaps: list[int] = []
         self.composites: list[int] = []
         self.mesh_attrs: list[int] = []
+        self.procedurals: list[int] = []
+        self.mipmaps: list[int] = []
+        # (camera, spp) of the render under way: the pixel footprint of procedural and
+        # MIP-mapped textures (set by the integrator; None: no footprint, no filtering)
+        self.footprint = None
         self.mesh_data: list = []       # meshes read by mesh_attrs, their slots and
         self.mesh_uses: list = []       # triangles (set by meshattr.bind)
         self.mesh_geometry: dict = {}
@@ -45,8 +50,17 @@ class TextureSet:
         """A new slot holding ``tex`` (one of the kinds of :mod:`.kinds`)."""
         slot = len(self.items)
         self.items.append(tex)
-        (self.constants, self.checkers, self.bitmaps, self.composites, self.mesh_attrs)[tex.kind].append(slot)
+        self._kind_lists()[tex.kind].append(slot)
         return slot
+
+    def _kind_lists(self) -> tuple:
+        return (self.constants, self.checkers, self.bitmaps, self.composites, self.mesh_attrs, self.procedurals,
+                self.mipmaps)
+
+    @property
+    def needs_footprint(self) -> bool:
+        """Whether a texture filters over the pixel footprint (procedural or MIP-mapped)."""
+        return bool(self.procedurals or self.mipmaps)
 
     def param_owners(self) -> list:
         """Objects whose ``params`` are scene parameters (under ``<path>.<name>``): the
@@ -97,6 +111,10 @@ class TextureSet:
             return 0.5 * (x + self.constant_value(t.y))
         if isinstance(t, MeshAttribute):   # data unknown at load time: a mid-range guess
             return 0.5 * float(t.params["scale"][0])
+        if isinstance(t, procedural.Procedural):
+            return 0.5
+        if isinstance(t, mipmap.MipMap):
+            return t.mean_luminance()
         return float(np.mean(spec.luminance_rgb(np.moveaxis(np.array(t.params["data"]), -1, 0)[:3])))
 
     def build(self) -> None:
@@ -104,7 +122,7 @@ class TextureSet:
         n = len(self.items)
         kinds = [self.kind_of(s) for s in range(n)]
         index = [0] * n
-        for lst in (self.constants, self.checkers, self.bitmaps, self.composites, self.mesh_attrs):
+        for lst in self._kind_lists():
             for i, s in enumerate(lst):
                 index[s] = i
         T = TextureTables(slot_kind=mi.UInt32(kinds), slot_index=mi.UInt32(index))
@@ -176,6 +194,14 @@ class TextureSet:
                 self._levels[d] = ({c.op for c in cs}, role("x", (OP_SCALE, OP_MIX, OP_CHECKER)),
                                    role("y", (OP_MIX, OP_CHECKER)), role("m", (OP_SCALE, OP_MIX)))
         T.mesh_attributes = meshattr.build_tables(self, index)
+        if self.procedurals:
+            items = [self.items[s] for s in self.procedurals]
+            T.procedurals = procedural.build_table(items)
+            self.procedural_info = procedural.static_info(items)
+        if self.mipmaps:
+            items = [self.items[s] for s in self.mipmaps]
+            T.mipmaps = mipmap.build_table(items)
+            self.mipmap_info = mipmap.static_info(items)
         dr.eval(T)
         self.tables = T
         self.bases = {c.base for c in consts}
@@ -378,12 +404,13 @@ class TextureSet:
     def _eval_leaf(self, slot, uv, lam, active, illuminant, si=None):
         """A constant, checkerboard (of constants), bitmap or mesh-attribute slot."""
         T = self.tables
-        if len(self.items) == 1 or not (self.checkers or self.bitmaps or self.mesh_attrs):
+        others = self.checkers or self.bitmaps or self.mesh_attrs or self.procedurals or self.mipmaps
+        if len(self.items) == 1 or not others:
             kind = mi.UInt32(self.kind_of(0)) if len(self.items) == 1 else mi.UInt32(CONSTANT)
         else:
             kind = dr.gather(mi.UInt32, T.slot_kind, slot, active)
         # With constants only, slots are constant-table indices already.
-        only_constants = not (self.checkers or self.bitmaps or self.composites or self.mesh_attrs)
+        only_constants = not (others or self.composites)
         idx = slot if only_constants else dr.gather(mi.UInt32, T.slot_index, slot, active)
         result = mi.Spectrum(0.0)
         if self.constants:
@@ -397,8 +424,9 @@ class TextureSet:
                 c1 = dr.gather(mi.UInt32, T.checkers.color1, idx, is_ck)
                 ci = dr.select(is_ck, dr.select(same, c0, c1), idx)
             on = active & (kind != BITMAP)
-            if self.mesh_attrs:
-                on &= kind != MESH_ATTRIBUTE
+            for k, lst in ((MESH_ATTRIBUTE, self.mesh_attrs), (PROCEDURAL, self.procedurals), (MIPMAP, self.mipmaps)):
+                if lst:
+                    on &= kind != k
             result = self._eval_constant(ci, lam, on, illuminant)
         if self.bitmaps:
             is_bm = active & (kind == BITMAP)
@@ -411,6 +439,12 @@ class TextureSet:
                     lambda i, u, l, m, r: r, label="bitmap texture")
             else:
                 result = dr.select(is_bm, self._eval_bitmap(idx, uv, lam, is_bm, illuminant), result)
+        if self.procedurals:
+            is_pr = active & (kind == PROCEDURAL)
+            result = dr.select(is_pr, procedural.evaluate(self, idx, uv, si, lam, is_pr), result)
+        if self.mipmaps:
+            is_mm = active & (kind == MIPMAP)
+            result = dr.select(is_mm, mipmap.evaluate(self, idx, uv, si, lam, is_mm, illuminant), result)
         if self.mesh_data and si is not None:   # elsewhere mesh attributes are 0
             is_ma = active & (kind == MESH_ATTRIBUTE)
             result = dr.select(is_ma, meshattr.evaluate(self, idx, si, lam, is_ma), result)
