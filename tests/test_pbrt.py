@@ -267,7 +267,7 @@ AttributeEnd
     h, w = img.shape
     assert img[:, w // 2:].sum() > 50 * img[:, :w // 2].sum()       # right half
     assert img[:h // 2].sum() > 50 * img[h // 2:].sum()             # top half (+y is up)
-    d = to_dict(path)
+    d = to_dict(path, mitsuba=True)
     sensor = mi.load_dict(d["sensor"])
     assert mi.traverse(sensor)["x_fov"][0] == pytest.approx(math.degrees(2 * math.atan(2.0)), rel=1e-5)
 
@@ -433,7 +433,7 @@ def test_converted_scene_matches_mitsuba(tmp_path, scale):
     measured here: 1273/1296 pixel-channels with pbrt-v4's default Gaussian."""
     res = 24 * scale
     path = write(tmp_path, SCENE.format(res=res, res2=res * 3 // 4))
-    d = to_dict(path)
+    d = to_dict(path, mitsuba=True)
     s = pbr.load_dict(d)
     r = validate.compare_renders(lambda seed=0, spp=0: np.asarray(pbr.render(s, seed=seed, spp=spp)),
                                  validate.mitsuba_render_fn(d), spp=256 * scale, batches=16, seed_a=5, seed_b=6)
@@ -580,8 +580,11 @@ Shape "trianglemesh" "point3 P" [-1 -1 0 1 -1 0 1 1 0 -1 1 0] "integer indices" 
 def test_checkerboard_conventions(tmp_path):
     """pbrt-v4's 2D checkerboard: tex1 where floor(s) + floor(t) is even, squares of size
     1 in (s, t) = (uscale u, vscale v): with scale 2 on a quad with uv (0, 0) at its lower
-    left, tex1 fills the lower-left and upper-right quarters."""
-    path = write(tmp_path, """
+    left, tex1 fills the lower-left and upper-right quarters. pbr's checkerboard (pbrt-v4's)
+    is box-filtered over the pixel footprint: pixels next to a square's edge are blurred,
+    so the quarters' inner pixels are compared; with mitsuba=True (Mitsuba's unfiltered
+    checkerboard, to_uv scaled by 1/2) the whole quarters."""
+    text = """
 Scale -1 1 1
 LookAt 0 0 1  0 0 0  0 1 0
 Camera "orthographic"
@@ -594,8 +597,15 @@ LightSource "distant" "point3 from" [0 0 1] "point3 to" [0 0 0] "rgb L" [3.14159
 Texture "c" "spectrum" "checkerboard" "float uscale" 2 "float vscale" 2 "rgb tex1" [1 1 1] "rgb tex2" [0.2 0.2 0.2]
 Material "diffuse" "texture reflectance" "c"
 Shape "trianglemesh" "point3 P" [-1 -1 0 1 -1 0 1 1 0 -1 1 0] "integer indices" [0 1 2 0 2 3] "point2 uv" [0 0 1 0 1 1 0 1]
-""")
+"""
+    path = write(tmp_path, text.replace('"integer xresolution" 8 "integer yresolution" 8',
+                                        '"integer xresolution" 16 "integer yresolution" 16'))
     y = luminance(render_mean(path))
+    q = [y[10:14, 2:6].mean(), y[2:6, 10:14].mean(), y[2:6, 2:6].mean(), y[10:14, 10:14].mean()]
+    np.testing.assert_allclose(q, [1.0, 1.0, 0.2, 0.2], rtol=0.03)
+    path = write(tmp_path, text, "mi.pbrt")
+    s = pbr.load_dict(to_dict(path, mitsuba=True))
+    y = luminance(np.asarray(pbr.render(s, seed=3), dtype=np.float64))
     q = [y[4:, :4].mean(), y[:4, 4:].mean(), y[:4, :4].mean(), y[4:, 4:].mean()]
     np.testing.assert_allclose(q, [1.0, 1.0, 0.2, 0.2], rtol=0.03)
 
