@@ -571,6 +571,10 @@ Shape "trianglemesh" "point3 P" [-1 -1 0 1 -1 0 1 1 0 -1 1 0] "integer indices" 
     for extra in ("", '"bool invert" true'):
         path = write(tmp_path, scene.format(extra=extra), f"img{len(out)}.pbrt")
         out.append(luminance(render_mean(path)))
+        # pbr's imagemap (pbrt-v4's MIP map and filters); Mitsuba's bitmap for Mitsuba.
+        assert to_dict(path)["material_0001"]["bsdf"]["reflectance"]["type"] == "imagemap"
+        if not extra:
+            assert to_dict(path, mitsuba=True)["material_0001"]["bsdf"]["reflectance"]["type"] == "bitmap"
     a, b = out
     # Orthographic view of [-1, 1]^2: the lower-left quarter (image rows 4..7, columns 0..3).
     assert a[4:, :4].mean() == pytest.approx(1.0, rel=0.02) and a[:4].max() < 1e-3 and a[4:, 4:].max() < 1e-3
@@ -631,3 +635,152 @@ Shape "trianglemesh" "point3 P" [-10 -10 0 10 -10 0 10 10 0 -10 10 0] "integer i
     # The centre pixel spans 2/9 units: cos^3 falloff across it is < 1%.
     assert y[4, 4] == pytest.approx(0.5 / math.pi * 8 / 4, rel=0.02)
     assert y[0, 0] == 0.0 and y[4, 0] == 0.0
+
+
+# -- pbrt-v4's cameras, films, filters and textures: pbr's plugins of pbrt-v4's names ------------------
+
+def test_filters_map_to_pbrt_plugins(tmp_path):
+    """Each PixelFilter gets pbrt-v4's parameters and defaults (the Gaussian's radius 1.5,
+    not Mitsuba's 4 sigma); the loaded filters have those radii. mitsuba=True gives
+    Mitsuba's filters."""
+    want = {"": {"type": "gaussian", "xradius": 1.5, "yradius": 1.5, "sigma": 0.5},
+            'PixelFilter "gaussian" "float sigma" 0.3': {"type": "gaussian", "xradius": 1.5, "yradius": 1.5,
+                                                         "sigma": 0.3},
+            'PixelFilter "mitchell" "float xradius" 1.5': {"type": "mitchell", "xradius": 1.5, "yradius": 2.0,
+                                                           "B": 1 / 3, "C": 1 / 3},
+            'PixelFilter "sinc" "float tau" 2': {"type": "sinc", "xradius": 4.0, "yradius": 4.0, "tau": 2.0},
+            'PixelFilter "triangle"': {"type": "triangle", "xradius": 2.0, "yradius": 2.0},
+            'PixelFilter "box" "float xradius" 1': {"type": "box", "xradius": 1.0, "yradius": 0.5},
+            'PixelFilter "box"': {"type": "box"}}
+    for i, (line, f) in enumerate(want.items()):
+        path = write(tmp_path, HEAD + line + '\nWorldBegin\nShape "sphere"\n', f"f{i}.pbrt")
+        d = to_dict(path)
+        assert d["sensor"]["film"]["rfilter"] == pytest.approx(f) if f["type"] != "box" or len(f) == 1 else True
+        assert d["sensor"]["film"]["rfilter"] == f
+        rf = pbr.load_dict(d).sensors[0].film.rfilter
+        assert rf.radius == pytest.approx(f.get("xradius", 0.5))
+    path = write(tmp_path, HEAD + 'WorldBegin\nShape "sphere"\n', "m.pbrt")
+    assert to_dict(path, mitsuba=True)["sensor"]["film"]["rfilter"] == {"type": "gaussian", "stddev": 0.5}
+
+
+def test_film_sensor_iso_and_white_balance(tmp_path):
+    """pbrt-v4's imaging ratio (shutterclose - shutteropen) x iso / 100 scales the image:
+    iso 400 with a 0.5 s shutter gives 2x the plain film's image (pbr's rgb film; the
+    plain one is Mitsuba's hdrfilm); a named camera sensor is refused (approximate:
+    cie1931 white-balanced at 6500 K); the CLI's --res sets the rgb film's size."""
+    body = 'WorldBegin\nLightSource "point" "point3 from" [0 0 3] "rgb I" [5 5 5]\nShape "sphere"\n'
+    plain = write(tmp_path, HEAD + body, "a.pbrt")
+    iso = write(tmp_path, HEAD.replace('Film "rgb"', 'Film "rgb" "float iso" 400').replace(
+        '"float fov" 40', '"float fov" 40 "float shutteropen" 0.25 "float shutterclose" 0.75') + body, "b.pbrt")
+    da, db = to_dict(plain), to_dict(iso)
+    assert da["sensor"]["film"]["type"] == "hdrfilm"
+    assert db["sensor"]["film"]["type"] == "rgb" and db["sensor"]["film"]["iso"] == 400.0
+    assert (db["sensor"]["shutter_open"], db["sensor"]["shutter_close"]) == (0.25, 0.75)
+    a, b = render_mean(plain), render_mean(iso)
+    assert a.mean() > 0.01
+    np.testing.assert_allclose(b, 2.0 * a, rtol=1e-4, atol=1e-6)
+    named = write(tmp_path, HEAD.replace('Film "rgb"', 'Film "rgb" "string sensor" "canon_eos_100d"') + body, "c.pbrt")
+    with pytest.raises(XMLError, match=r"c.pbrt:4: Film: film sensor 'canon_eos_100d'.*not supported"):
+        to_dict(named)
+    d, notes, _ = convert(named, approximate=True)
+    assert d["sensor"]["film"]["whitebalance"] == 6500.0 and "sensor" not in d["sensor"]["film"]
+    pbr.load_dict(d)
+    from pbr.cli import main
+    out = tmp_path / "out.exr"
+    assert main(["render", iso, "-o", str(out), "--res", "16", "--backend", "llvm"]) == 0
+    import mitsuba as mi
+    assert np.asarray(mi.Bitmap(str(out))).shape[:2] == (12, 16)
+
+
+def test_camera_motion_blur(tmp_path):
+    """ActiveTransform EndTime on the camera's transform: to_world_end and
+    transform_times; the camera turns during the shutter, so a small light is smeared
+    across the image (rows of light wider than the static image's)."""
+    text = """
+LookAt 0 0 0  0 0 1  0 1 0
+{motion}
+Camera "perspective" "float fov" 30
+Film "rgb" "integer xresolution" 32 "integer yresolution" 8
+Sampler "independent" "integer pixelsamples" 64
+Integrator "path" "integer maxdepth" 1
+PixelFilter "box"
+WorldBegin
+AttributeBegin
+  AreaLightSource "diffuse" "rgb L" [1 1 1]
+  Translate 0 0 5
+  Shape "sphere" "float radius" 0.1
+AttributeEnd
+"""
+    still = write(tmp_path, text.format(motion=""), "still.pbrt")
+    moving = write(tmp_path, text.format(motion="TransformTimes 0 1\nActiveTransform EndTime\nRotate 8 0 1 0\n"
+                                                "ActiveTransform All"), "moving.pbrt")
+    d = to_dict(moving)
+    assert d["sensor"]["transform_times"] == [0.0, 1.0] and "to_world_end" in d["sensor"]
+    lit = [int((luminance(render_mean(p)).max(axis=0) > 1e-3).sum()) for p in (still, moving)]
+    assert lit[0] <= 3 and lit[1] >= 8, lit
+    with pytest.raises(XMLError, match="moving camera"):
+        to_dict(moving, mitsuba=True)
+
+
+@pytest.mark.parametrize("camera", ["perspective", "orthographic"])
+def test_screen_window(tmp_path, camera):
+    """pbrt-v4's screenwindow picks a part of the screen: a light at screen (0.5, 0.5)
+    (fov 90 perspective: direction (0.5, 0.5, 1); orthographic: camera-space x, y =
+    0.5) shows at the image's centre with the window [0, 1] x [0, 1], in the upper right
+    quarter without it."""
+    pos = "2.5 2.5 5" if camera == "perspective" else "0.5 0.5 5"
+    text = f"""
+LookAt 0 0 0  0 0 1  0 1 0
+Camera "{camera}" "float fov" 90 {{window}}
+Film "rgb" "integer xresolution" 16 "integer yresolution" 16
+Sampler "independent" "integer pixelsamples" 16
+Integrator "path" "integer maxdepth" 1
+PixelFilter "box"
+WorldBegin
+AttributeBegin
+  AreaLightSource "diffuse" "rgb L" [1 1 1]
+  Translate {pos}
+  Shape "sphere" "float radius" 0.05
+AttributeEnd
+"""
+    if camera == "orthographic":
+        text = text.replace('"float fov" 90 ', "")
+    peaks = []
+    for i, window in enumerate(("", '"float screenwindow" [0 1 0 1]')):
+        img = luminance(render_mean(write(tmp_path, text.format(window=window), f"w{i}.pbrt")))
+        peaks.append(np.unravel_index(np.argmax(img), img.shape))
+    # pbrt's camera x points right (LookAt from the origin down +z, its image is mirrored
+    # by the left-handed camera space): (0.5, 0.5) is the upper right quarter's centre.
+    assert peaks[0] in [(r, c) for r in (3, 4) for c in (11, 12)], peaks
+    assert peaks[1] in [(r, c) for r in (7, 8) for c in (7, 8)], peaks
+
+
+def test_texture_space_and_3d_checkerboard(tmp_path):
+    """3D textures and non-UV mappings take to_world = the CTM at the Texture directive:
+    a 3D checkerboard translated by one unit swaps its colours at a point."""
+    text = """
+Scale -1 1 1
+LookAt 0.5 0.5 5  0.5 0.5 0  0 1 0
+Camera "orthographic" "float screenwindow" [-0.4 0.4 -0.4 0.4]
+Film "rgb" "integer xresolution" 4 "integer yresolution" 4
+Sampler "independent" "integer pixelsamples" 256
+Integrator "path" "integer maxdepth" 1
+PixelFilter "box"
+WorldBegin
+LightSource "distant" "point3 from" [0 0 1] "point3 to" [0 0 0] "rgb L" [3.14159265 3.14159265 3.14159265]
+AttributeBegin
+{xf}
+Texture "c" "spectrum" "checkerboard" "integer dimension" 3 "rgb tex1" [1 1 1] "rgb tex2" [0.2 0.2 0.2]
+AttributeEnd
+Material "diffuse" "texture reflectance" "c"
+Shape "trianglemesh" "point3 P" [0 0 0.5 1 0 0.5 1 1 0.5 0 1 0.5] "integer indices" [0 1 2 0 2 3]
+"""
+    vals = []
+    for i, xf in enumerate(("", "Translate 1 0 0")):
+        path = write(tmp_path, text.format(xf=xf), f"t{i}.pbrt")
+        d = to_dict(path)
+        assert d["material_0001"]["bsdf"]["reflectance"]["type"] == "checkerboard"
+        assert ("to_world" in d["material_0001"]["bsdf"]["reflectance"]) == bool(xf)
+        vals.append(luminance(render_mean(path)).mean())
+    # The visible [0.1, 0.9]^2 x {0.5} lies in cell (0, 0, 0): tex1; moved by one cell: tex2.
+    np.testing.assert_allclose(vals, [1.0, 0.2], rtol=0.03)
