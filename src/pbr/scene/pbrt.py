@@ -11,7 +11,12 @@ and units (docs/pbrt.md lists every mapping and what is approximated or left out
 * Cameras: pbrt's camera space is left-handed (x to the right on the image); Mitsuba's
   is right-handed with x to the left, so ``to_world = inverse(CTM) @ Scale(-1, 1, 1)``;
   ``fov`` is the field of view of the shorter image axis (Mitsuba's ``fov_axis``
-  'smaller').
+  'smaller'). A moving camera gets ``to_world_end`` and ``transform_times``.
+* Filters, films, cameras and textures that pbr registers under pbrt-v4's names
+  (``gaussian`` of radius 1.5, ``mitchell``, ``sinc``, ``triangle``; ``rgb`` with its
+  pixel sensor, ``gbuffer``, ``spectral``; ``spherical``, ``realistic``; ``imagemap``,
+  ``checkerboard``, ``dots``, ``fbm``, ...) take pbrt-v4's parameters; Mitsuba's plugin
+  is used where it gives the same image. ``mitsuba=True`` keeps to Mitsuba 3's plugins.
 * Lights: pbrt-v4 divides every light's spectrum by its luminance
   (``SpectrumToPhotometric``) before ``scale``/``power``: RGB values are already of unit
   luminance in pbr (rgb times a D65 of unit luminance), other spectra (``blackbody``,
