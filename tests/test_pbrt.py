@@ -784,3 +784,82 @@ Shape "trianglemesh" "point3 P" [0 0 0.5 1 0 0.5 1 1 0.5 0 1 0.5] "integer indic
         vals.append(luminance(render_mean(path)).mean())
     # The visible [0.1, 0.9]^2 x {0.5} lies in cell (0, 0, 0): tex1; moved by one cell: tex2.
     np.testing.assert_allclose(vals, [1.0, 0.2], rtol=0.03)
+
+
+@pytest.mark.parametrize("pos, column", [("0 0 5", 0.25), ("-5 0 0", 0.5), ("5 0 0", 0.0)])
+def test_spherical_camera_directions(tmp_path, pos, column):
+    """pbrt-v4's equirectangular spherical camera: u = phi / 2 pi of the camera-space
+    direction (x, z, y) in spherical coordinates (pbrt-v4 swaps y and z), v = theta / pi:
+    camera +z at u = 1/4, -x at u = 1/2, +x at u = 0 (the seam), all at v = 1/2. The
+    reader's to_world (the CTM's inverse times Scale(-1, 1, 1), as for every camera) gives
+    these positions; without the mirror, -x and +x swap."""
+    path = write(tmp_path, f"""
+LookAt 0 0 0  0 0 1  0 1 0
+Camera "spherical" "string mapping" "equirectangular"
+Film "rgb" "integer xresolution" 32 "integer yresolution" 16
+Sampler "independent" "integer pixelsamples" 16
+Integrator "path" "integer maxdepth" 1
+PixelFilter "box"
+WorldBegin
+AttributeBegin
+  AreaLightSource "diffuse" "rgb L" [1 1 1]
+  Translate {pos}
+  Shape "sphere" "float radius" 0.4
+AttributeEnd
+""")
+    assert to_dict(path)["sensor"]["type"] == "spherical"
+    img = luminance(render_mean(path))
+    cols = img.sum(axis=0)
+    c = np.arange(32) + 0.5
+    # circular mean of the lit columns (the seam wraps around)
+    ang = np.angle(np.sum(cols * np.exp(2j * np.pi * c / 32))) / (2 * np.pi) % 1.0
+    assert min(abs(ang - column), 1 - abs(ang - column)) < 0.02, ang
+    rows = img.sum(axis=1)
+    assert rows[7:9].sum() > 0.9 * rows.sum()
+
+
+def test_realistic_camera_from_pbrt(tmp_path):
+    """A realistic camera: its lens file is found relative to the scene, the film's
+    'diagonal' reaches it (so the film is pbr's rgb, not hdrfilm), and a light at
+    camera-space +x (pbrt-v4's: the image's right) shows in the right half."""
+    (tmp_path / "lenses").mkdir()
+    (tmp_path / "lenses" / "singlet.dat").write_text(
+        "# a biconvex singlet (R 50 mm, 5 mm thick, n 1.5), the stop 2 mm behind it\n"
+        "50 5 1.5 20\n-50 2 1 20\n0 45 0 10\n")
+    path = write(tmp_path, """
+LookAt 0 0 0  0 0 1  0 1 0
+Camera "realistic" "string lensfile" "lenses/singlet.dat" "float aperturediameter" 10 "float focusdistance" 100
+Film "rgb" "integer xresolution" 32 "integer yresolution" 24 "float diagonal" 20
+Sampler "independent" "integer pixelsamples" 64
+Integrator "path" "integer maxdepth" 1
+PixelFilter "box"
+WorldBegin
+AttributeBegin
+  AreaLightSource "diffuse" "rgb L" [1 1 1]
+  Translate 8 0 100
+  Shape "sphere" "float radius" 2
+AttributeEnd
+""")
+    d = to_dict(path)
+    assert d["sensor"]["lensfile"] == str(tmp_path / "lenses" / "singlet.dat")
+    assert d["sensor"]["film"]["type"] == "rgb" and d["sensor"]["film"]["diagonal"] == 20.0
+    img = luminance(render_mean(path))
+    w = img.shape[1]
+    assert img[:, w // 2:].sum() > 20 * img[:, :w // 2].sum()
+
+
+def test_gbuffer_and_spectral_films(tmp_path):
+    """Film "gbuffer" and "spectral" become pbr's films of those names with pbrt-v4's
+    parameters (the image has their extra channels); 'exposuretime', which pbrt-v4's
+    films do not take, is noted."""
+    body = 'WorldBegin\nLightSource "point" "point3 from" [0 0 3]\nShape "sphere"\n'
+    g = write(tmp_path, HEAD.replace('Film "rgb"', 'Film "gbuffer" "string coordinatesystem" "world" '
+                                     '"float exposuretime" 2') + body, "g.pbrt")
+    d, notes, _ = convert(g)
+    assert d["sensor"]["film"]["type"] == "gbuffer" and d["sensor"]["film"]["coordinatesystem"] == "world"
+    assert "exposuretime" not in d["sensor"]["film"] and any("exposuretime" in n for n in notes)
+    assert np.asarray(pbr.render(pbr.load_dict(d), spp=1)).shape == (24, 32, 3 + 14)
+    s = write(tmp_path, HEAD.replace('Film "rgb"', 'Film "spectral" "integer nbuckets" 4') + body, "s.pbrt")
+    d = to_dict(s)
+    assert d["sensor"]["film"]["type"] == "spectral" and d["sensor"]["film"]["nbuckets"] == 4
+    assert np.asarray(pbr.render(pbr.load_dict(d), spp=1)).shape == (24, 32, 3 + 4)
