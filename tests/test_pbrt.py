@@ -863,3 +863,32 @@ def test_gbuffer_and_spectral_films(tmp_path):
     d = to_dict(s)
     assert d["sensor"]["film"]["type"] == "spectral" and d["sensor"]["film"]["nbuckets"] == 4
     assert np.asarray(pbr.render(pbr.load_dict(d), spp=1)).shape == (24, 32, 3 + 4)
+
+
+def test_imagemap_encoding_as_pbrt(tmp_path):
+    """pbrt-v4 decodes 8-bit PNG files with 'encoding' (default sRGB) and every other
+    8-bit format (JPEG, ...) as sRGB whatever 'encoding' says: a grey JPEG texel of 128
+    with "encoding" "linear" reads as sRGB 128 (0.216), a PNG one as 128/255 (0.502)."""
+    import mitsuba as mi
+    img = np.full((4, 4, 3), 128, dtype=np.uint8)
+    for ext in ("png", "jpg"):
+        mi.Bitmap(img).write(str(tmp_path / f"grey.{ext}"))
+    vals = []
+    for ext in ("png", "jpg"):
+        path = write(tmp_path, f"""
+Scale -1 1 1
+LookAt 0 0 1  0 0 0  0 1 0
+Camera "orthographic"
+Film "rgb" "integer xresolution" 4 "integer yresolution" 4
+Sampler "independent" "integer pixelsamples" 64
+Integrator "path" "integer maxdepth" 1
+PixelFilter "box"
+WorldBegin
+LightSource "distant" "point3 from" [0 0 1] "point3 to" [0 0 0] "rgb L" [3.14159265 3.14159265 3.14159265]
+Texture "t" "float" "imagemap" "string filename" "grey.{ext}" "string encoding" "linear"
+Material "diffuse" "texture reflectance" "t"
+Shape "trianglemesh" "point3 P" [-1 -1 0 1 -1 0 1 1 0 -1 1 0] "integer indices" [0 1 2 0 2 3] "point2 uv" [0 0 1 0 1 1 0 1]
+""", f"{ext}.pbrt")
+        vals.append(luminance(render_mean(path)).mean())
+    srgb = ((128 / 255 + 0.055) / 1.055) ** 2.4
+    np.testing.assert_allclose(vals, [128 / 255, srgb], rtol=0.03)

@@ -1087,6 +1087,13 @@ class PBRTScene:
                     q.used = True
                 return 0.5
         t = self.passthrough(p, cls)
+        if cls == "imagemap" and "encoding" in t and os.path.splitext(t["filename"])[1].lower() not in (
+                ".png", ".exr", ".pfm", ".hdr", ".qoi"):
+            # pbrt-v4 reads 8-bit images other than PNG (JPEG, TGA, BMP, ...) as sRGB,
+            # whatever 'encoding' says (pbr's imagemap would honour it).
+            self.note(p.p["encoding"].where, "Texture: pbrt-v4 reads this 8-bit image as sRGB whatever its "
+                                             f"'encoding' ({t['encoding']!r}): ignored")
+            del t["encoding"]
         if cls == "checkerboard":
             t.setdefault("dimension", 2)      # pbrt-v4's checkerboard, also without tex1/tex2
         if not np.allclose(self.ctm(), np.eye(4)):
