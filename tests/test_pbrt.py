@@ -755,9 +755,12 @@ AttributeEnd
     assert peaks[1] in [(r, c) for r in (7, 8) for c in (7, 8)], peaks
 
 
-def test_texture_space_and_3d_checkerboard(tmp_path):
+@pytest.mark.parametrize("kind", ['"integer dimension" 3',
+                                  '"string mapping" "planar" "vector3 v1" [1 0 0] "vector3 v2" [0 1 0]'])
+def test_texture_space_and_3d_checkerboard(tmp_path, kind):
     """3D textures and non-UV mappings take to_world = the CTM at the Texture directive:
-    a 3D checkerboard translated by one unit swaps its colours at a point."""
+    a 3D checkerboard, or a 2D one over a planar mapping (s = x, t = y in texture
+    space), translated by one unit swaps its colours at a point."""
     text = """
 Scale -1 1 1
 LookAt 0.5 0.5 5  0.5 0.5 0  0 1 0
@@ -770,14 +773,14 @@ WorldBegin
 LightSource "distant" "point3 from" [0 0 1] "point3 to" [0 0 0] "rgb L" [3.14159265 3.14159265 3.14159265]
 AttributeBegin
 {xf}
-Texture "c" "spectrum" "checkerboard" "integer dimension" 3 "rgb tex1" [1 1 1] "rgb tex2" [0.2 0.2 0.2]
+Texture "c" "spectrum" "checkerboard" {kind} "rgb tex1" [1 1 1] "rgb tex2" [0.2 0.2 0.2]
 AttributeEnd
 Material "diffuse" "texture reflectance" "c"
 Shape "trianglemesh" "point3 P" [0 0 0.5 1 0 0.5 1 1 0.5 0 1 0.5] "integer indices" [0 1 2 0 2 3]
 """
     vals = []
     for i, xf in enumerate(("", "Translate 1 0 0")):
-        path = write(tmp_path, text.format(xf=xf), f"t{i}.pbrt")
+        path = write(tmp_path, text.format(xf=xf, kind=kind), f"t{i}.pbrt")
         d = to_dict(path)
         assert d["material_0001"]["bsdf"]["reflectance"]["type"] == "checkerboard"
         assert ("to_world" in d["material_0001"]["bsdf"]["reflectance"]) == bool(xf)
