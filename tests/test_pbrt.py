@@ -425,15 +425,21 @@ AttributeEnd
 """
 
 
-def test_converted_scene_matches_mitsuba(tmp_path, scale):
+@pytest.mark.parametrize("camera", ["", '"float lensradius" 0.15 "float focaldistance" 5',
+                                    '"float screenwindow" [-0.5 1.5 -1 0.5]'])
+def test_converted_scene_matches_mitsuba(tmp_path, scale, camera):
     """The dict of a pbrt-v4 scene (textured diffuse floor, gold and glass spheres, a
-    partial sphere, point and area lights) renders the same in pbr and in Mitsuba 3. The
-    box filter: with a Gaussian the per-pixel test cannot pass near edges although the
-    means agree (pbr importance-samples the filter, Mitsuba splats; docs/integrators.md),
-    measured here: 1273/1296 pixel-channels with pbrt-v4's default Gaussian."""
+    partial sphere, point and area lights; a pinhole, a thin lens, an off-centre screen
+    window: Mitsuba's fov and principal point) renders the same in pbr and in Mitsuba 3
+    (``mitsuba=True``). The box filter: with a Gaussian the per-pixel test cannot pass
+    near edges although the means agree (pbr importance-samples the filter, Mitsuba
+    splats; docs/integrators.md), measured here: 1273/1296 pixel-channels with pbrt-v4's
+    default Gaussian."""
     res = 24 * scale
-    path = write(tmp_path, SCENE.format(res=res, res2=res * 3 // 4))
+    path = write(tmp_path, SCENE.format(res=res, res2=res * 3 // 4).replace(
+        'Camera "perspective" "float fov" 35', 'Camera "perspective" "float fov" 35 ' + camera))
     d = to_dict(path, mitsuba=True)
+    assert d["sensor"]["type"] == ("thinlens" if "lens" in camera else "perspective")
     s = pbr.load_dict(d)
     r = validate.compare_renders(lambda seed=0, spp=0: np.asarray(pbr.render(s, seed=seed, spp=spp)),
                                  validate.mitsuba_render_fn(d), spp=256 * scale, batches=16, seed_a=5, seed_b=6)
