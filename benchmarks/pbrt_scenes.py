@@ -10,7 +10,8 @@ For every scene file (a ``.pbrt`` file with ``WorldBegin``) under ``--root``:
 3. render at ``--res`` pixels wide and ``--spp`` samples per pixel with pbr (time), if
    the approximate dict loads and ``--no-render`` is not given;
 4. with ``--compare``: scenes that load strictly and whose features Mitsuba 3 has are
-   rendered by Mitsuba 3 too and compared statistically (``pbr.validate``; box filter).
+   converted for Mitsuba 3 (``mitsuba=True``), rendered by pbr and Mitsuba 3 and compared
+   statistically (``pbr.validate``; box filter).
 
 Prints one row per scene and a summary. The collection is 1.5 GB (geometry, textures);
 where only its scene files are present (``/work/data/pbrt-v4-scenes`` holds the text
@@ -90,6 +91,14 @@ def run(path: str, args) -> dict:
         row["render"] = f"FAIL {str(e).splitlines()[0][:80]}"
         return row
     if args.compare and row["strict"] == "ok":
+        # The dict for Mitsuba 3 (mitsuba=True: hdrfilm, Mitsuba's filters and textures);
+        # both render it with a box filter (pbr samples filters, Mitsuba splats them).
+        try:
+            d, _, _ = convert(path, skip_missing=True, res=args.res, spp=args.spp, mesh_dir=args.mesh_dir,
+                              mitsuba=True)
+        except XMLError as e:
+            row["mitsuba"] = f"no Mitsuba dict: {blocker(str(e))}"
+            return row
         d["sensor"]["film"]["rfilter"] = {"type": "box"}
         s = pbr.load_dict(d, base_dir=os.path.dirname(path))
         try:
@@ -97,6 +106,7 @@ def run(path: str, args) -> dict:
                                          validate.mitsuba_render_fn(d), spp=args.spp * 16, batches=16,
                                          seed_a=5, seed_b=6)
             row["mitsuba"] = f"{'PASS' if r else 'FAIL'} ratio {float(np.mean(r.mean_ratio)):.3f}"
+            row["compare"] = r.summary()
         except Exception as e:
             row["mitsuba"] = "Mitsuba cannot load it (pbr-only plugins)"
     return row
@@ -125,6 +135,8 @@ def main(argv=None) -> int:
         rend = f"{r['render_s']:.2f}" if "render_s" in r else r.get("render", "-")
         print(f"{r['scene']:44s} {r['strict'][:50]:50s} {conv:>6s} {r.get('missing', '-')!s:>4s} "
               f"{r.get('load', '-'):>4s} {rend:>8s}  {r.get('mitsuba', '')}{r.get('why', '')}")
+        if args.notes and r.get("compare"):
+            print("      " + r["compare"].replace("\n", "\n      "))
         if args.notes:
             for n in r.get("notes", []):
                 print("      " + n.replace(args.root + "/", ""))

@@ -11,7 +11,12 @@ and units (docs/pbrt.md lists every mapping and what is approximated or left out
 * Cameras: pbrt's camera space is left-handed (x to the right on the image); Mitsuba's
   is right-handed with x to the left, so ``to_world = inverse(CTM) @ Scale(-1, 1, 1)``;
   ``fov`` is the field of view of the shorter image axis (Mitsuba's ``fov_axis``
-  'smaller').
+  'smaller'). A moving camera gets ``to_world_end`` and ``transform_times``.
+* Filters, films, cameras and textures that pbr registers under pbrt-v4's names
+  (``gaussian`` of radius 1.5, ``mitchell``, ``sinc``, ``triangle``; ``rgb`` with its
+  pixel sensor, ``gbuffer``, ``spectral``; ``spherical``, ``realistic``; ``imagemap``,
+  ``checkerboard``, ``dots``, ``fbm``, ...) take pbrt-v4's parameters; Mitsuba's plugin
+  is used where it gives the same image. ``mitsuba=True`` keeps to Mitsuba 3's plugins.
 * Lights: pbrt-v4 divides every light's spectrum by its luminance
   (``SpectrumToPhotometric``) before ``scale``/``power``: RGB values are already of unit
   luminance in pbr (rgb times a D65 of unit luminance), other spectra (``blackbody``,
@@ -301,8 +306,9 @@ class PBRTScene:
     """Reads a pbrt-v4 scene file into a Mitsuba-style dict (see the module docstring)."""
 
     def __init__(self, path: str, approximate: bool = False, mesh_dir: str | None = None, overrides=None,
-                 skip_missing: bool = False):
+                 skip_missing: bool = False, mitsuba: bool = False):
         self.path = os.path.abspath(path)
+        self.mitsuba = mitsuba
         self.skip_missing = skip_missing
         self.base = os.path.dirname(self.path)
         self.approximate = approximate
@@ -326,6 +332,7 @@ class PBRTScene:
         self.including: list[str] = []
         self.default_material = None
         self.transform_times = (0.0, 1.0)
+        self.camera_times = (0.0, 1.0)
 
     # -- bookkeeping -------------------------------------------------------------------
     def note(self, where: str, msg: str) -> None:
@@ -360,6 +367,12 @@ class PBRTScene:
 
     def ctm(self):
         return self.state.ctm[0]
+
+    def pbr_plugin(self, registry, name: str) -> bool:
+        """Whether ``name`` (a pbrt-v4 plugin name) is used as pbr's plugin of that name:
+        registered, and the dict is not meant for Mitsuba 3 (``mitsuba=True`` keeps to
+        Mitsuba's plugins, substituting or refusing the rest)."""
+        return name in registry and not self.mitsuba
 
     # -- reading -----------------------------------------------------------------------
     def read(self) -> dict:
@@ -554,6 +567,7 @@ class PBRTScene:
     def _d_Camera(self, d):
         self._option(d, "camera")
         self.camera_ctm = [m.copy() for m in self.state.ctm]
+        self.camera_times = self.transform_times
         self.named_cs["camera"] = [np.linalg.inv(m) for m in self.state.ctm]
         self.camera_medium = self.state.outside
 
@@ -677,7 +691,8 @@ class PBRTScene:
         if shape is None:
             return
         if self.state.ctm[0] is not self.state.ctm[1] and not np.allclose(self.state.ctm[0], self.state.ctm[1]):
-            self.unsupported(d, "animated transforms (ActiveTransform EndTime): the start transform is used")
+            self.unsupported(d, "animated transforms of shapes (ActiveTransform EndTime; Mitsuba's ray tracer "
+                                "builds every shape at one time, only cameras move): the start transform is used")
         mat = self.state.material
         if mat is None:
             if self.default_material is None:
@@ -1005,7 +1020,9 @@ class PBRTScene:
         if cls == "mix":
             return {"type": "mix", "tex1": p.value("tex1", 0.0), "tex2": p.value("tex2", 1.0),
                     "amount": p.value("amount", 0.5, kind="float")}
-        if cls == "imagemap" and "imagemap" not in TEXTURE_TYPES:
+        if cls in ("imagemap", "checkerboard", "dots") and self.pbr_plugin(TEXTURE_TYPES, cls):
+            return self.pbrt_texture(p, cls)
+        if cls == "imagemap":
             fname = p.string("filename")
             if fname is None:
                 raise p.error(None, "imagemap needs \"string filename\"")
@@ -1046,11 +1063,42 @@ class PBRTScene:
                     "to_uv": _mi_transform(_affine3_to4(m))}
         if cls in TEXTURE_TYPES or cls in ("fbm", "wrinkled", "windy", "marble", "dots", "checkerboard",
                                            "imagemap", "bilerp", "directionmix", "ptex"):
-            if cls not in TEXTURE_TYPES:
-                self.unsupported(p.d, f"texture {cls!r} (pbr has no such texture yet): a constant 0.5 is used")
+            if not self.pbr_plugin(TEXTURE_TYPES, cls):
+                who = "Mitsuba 3 (mitsuba=True)" if self.mitsuba else "pbr"
+                self.unsupported(p.d, f"texture {cls!r} ({who} has no such texture): a constant 0.5 is used")
+                for q in p.d.params:
+                    q.used = True
                 return 0.5
-            return self.passthrough(p, cls)
+            return self.pbrt_texture(p, cls)
         raise p.error(None, f"unknown texture {cls!r}")
+
+    def pbrt_texture(self, p: _Params, cls: str):
+        """pbr's texture of pbrt-v4's name, with pbrt-v4's parameters, and ``to_world`` =
+        the CTM at the ``Texture`` directive (pbrt-v4's texture space, used by 3D
+        textures and the spherical, cylindrical and planar mappings)."""
+        if cls == "imagemap":
+            fname = p.string("filename")
+            if fname is None:
+                raise p.error(None, "imagemap needs \"string filename\"")
+            full = resolve(fname, self.base)
+            if not os.path.exists(full):
+                self.missing(p.d.where, p.d.name, fname, full)
+                for q in p.d.params:
+                    q.used = True
+                return 0.5
+        t = self.passthrough(p, cls)
+        if cls == "imagemap" and "encoding" in t and os.path.splitext(t["filename"])[1].lower() not in (
+                ".png", ".exr", ".pfm", ".hdr", ".qoi"):
+            # pbrt-v4 reads 8-bit images other than PNG (JPEG, TGA, BMP, ...) as sRGB,
+            # whatever 'encoding' says (pbr's imagemap would honour it).
+            self.note(p.p["encoding"].where, "Texture: pbrt-v4 reads this 8-bit image as sRGB whatever its "
+                                             f"'encoding' ({t['encoding']!r}): ignored")
+            del t["encoding"]
+        if cls == "checkerboard":
+            t.setdefault("dimension", 2)      # pbrt-v4's checkerboard, also without tex1/tex2
+        if not np.allclose(self.ctm(), np.eye(4)):
+            t["to_world"] = _mi_transform(self.ctm())
+        return t
 
     def passthrough(self, p: _Params, t: str) -> dict:
         """A plugin registered in pbr under pbrt-v4's name: pbrt-v4's parameter names pass
@@ -1060,7 +1108,7 @@ class PBRTScene:
             q.used = True
             if q.type in ("rgb", "spectrum", "blackbody", "texture"):
                 out[q.name] = self.spectrum_value(q, p, "albedo")
-            elif q.type == "string" and q.name == "filename":
+            elif q.type == "string" and q.name in ("filename", "lensfile"):
                 out[q.name] = resolve(q.values[0], self.base)
             elif len(q.values) == 1:
                 out[q.name] = q.values[0] if q.type != "float" else float(q.values[0])
@@ -1436,15 +1484,55 @@ class PBRTScene:
             w, h = max(1, round(nh * w / h)), nh
         return f, w, h
 
+    def exposure(self) -> float:
+        """The camera's shutter interval: pbrt-v4's exposure time for the film's sensor."""
+        if self.camera is None:
+            return 1.0
+        p = _Params(self.camera, self)
+        return p.one("shutterclose", "float", 1.0) - p.one("shutteropen", "float", 0.0)
+
     def make_film(self) -> dict:
+        """pbrt-v4's film: Mitsuba's ``hdrfilm`` when it gives the same image (an ``rgb``
+        film whose pixel sensor is the identity: imaging ratio shutter x iso / 100 = 1, no
+        white balance, no ``maxcomponentvalue``, no ``diagonal`` for a realistic camera),
+        else pbr's film of pbrt-v4's name and parameters (``mitsuba=True``: hdrfilm, the
+        rest noted)."""
         f, w, h = self.film_size()
         t = self.film.args[0] if self.film else "rgb"
         if t not in ("rgb", "gbuffer", "spectral"):
             raise XMLError(f"{self.film.where}: Film: unknown film {t!r} (pbrt-v4's: rgb, gbuffer, spectral)")
-        if t in FILMS:
-            film = self.passthrough(f, t) if f else {"type": t}
+        iso = f.one("iso", "float", 100.0) if f else 100.0
+        wb = f.one("whitebalance", "float", 0.0) if f else 0.0
+        sensor = f.string("sensor", "cie1931") if f else "cie1931"
+        ratio = self.exposure() * iso / 100.0
+        cam = self.camera.args[0] if self.camera else "perspective"
+        plain = (t == "rgb" and ratio == 1.0 and wb == 0 and sensor == "cie1931"
+                 and not (f and f.has("maxcomponentvalue")) and not (cam == "realistic" and f and f.has("diagonal")))
+        if f is not None and f.has("exposuretime"):
+            f.p["exposuretime"].used = True
+            self.note(f.p["exposuretime"].where, "Film: 'exposuretime' is not a pbrt-v4 film parameter (pbrt-v4's "
+                                                 "exposure time is the camera's shutterclose - shutteropen): ignored")
+        if not plain and self.pbr_plugin(FILMS, t):
+            film = {"type": t}
+            for q in (f.d.params if f else ()):
+                if q.name in ("filename", "exposuretime", "xresolution", "yresolution"):
+                    q.used = True
+                    continue
+                if q.name == "sensor" and sensor != "cie1931":
+                    q.used = True
+                    # pbrt-v4 white-balances a camera sensor to 6500 K unless told otherwise.
+                    self.unsupported(self.film, f"film sensor {sensor!r} (pbrt-v4's measured camera response "
+                                                "curves; pbr has only 'cie1931'): 'cie1931' with white balance "
+                                                f"{wb or 6500:g} K is used")
+                    film["whitebalance"] = float(wb or 6500)
+                    continue
+                if q.name == "whitebalance" and "whitebalance" in film:
+                    q.used = True
+                    continue
+                q.used = True
+                film[q.name] = list(q.values) if len(q.values) != 1 else (
+                    float(q.values[0]) if q.type == "float" else q.values[0])
             film["xresolution"], film["yresolution"] = w, h
-            film.pop("filename", None)
         else:
             film = {"type": "hdrfilm", "width": w, "height": h, "pixel_format": "rgb"}
             if t != "rgb" and self.film is not None:
@@ -1462,16 +1550,12 @@ class PBRTScene:
                 if pb is not None:
                     film.update(crop_offset_x=pb[0], crop_offset_y=pb[2], crop_width=pb[1] - pb[0],
                                 crop_height=pb[3] - pb[2])
-                iso, et = f.one("iso", "float", 100.0), f.one("exposuretime", "float", 1.0)
-                sensor, wb = f.string("sensor", "cie1931"), f.one("whitebalance", "float", 0.0)
-                if sensor != "cie1931" or wb != 0:
-                    self.unsupported(self.film, f"film sensor {sensor!r} with whitebalance {wb} (pbr's hdrfilm "
-                                                "is pbrt-v4's cie1931 sensor without white balancing)")
-                if iso * et != 100.0:
-                    # pbrt-v4's imaging ratio for the cie1931 sensor: a factor on the image.
-                    self.note(self.film.where, f"Film: iso {iso} and exposuretime {et}: pbrt-v4's image is "
-                                               f"pbr's times {iso * et / 100:g}")
-                for k in ("filename", "maxcomponentvalue", "diagonal", "savefp16", "writefp16"):
+                if not plain and t == "rgb":
+                    self.unsupported(self.film, f"pbrt-v4's pixel sensor (imaging ratio {ratio:g}, white balance "
+                                                f"{wb:g}, sensor {sensor!r}, maxcomponentvalue) in a dict for "
+                                                "Mitsuba 3: a plain hdrfilm is used")
+                for k in ("filename", "maxcomponentvalue", "diagonal", "savefp16", "writefp16", "iso",
+                          "whitebalance", "sensor", "nbuckets", "lambdamin", "lambdamax", "coordinatesystem"):
                     if f.has(k):
                         f.p[k].used = True
                 self.warn_unused(f, f"film {t!r}")
@@ -1479,73 +1563,119 @@ class PBRTScene:
         return film
 
     def make_filter(self) -> dict:
-        if self.filter is None:
-            t, f = "gaussian", None
-        else:
-            t, f = self.filter.args[0], _Params(self.filter, self)
-        if t in FILTERS and t not in ("gaussian", "box"):
-            return self.passthrough(f, t) if f else {"type": t}
+        """pbrt-v4's pixel filter with its parameters and defaults (pbr registers each
+        under pbrt-v4's name); ``mitsuba=True``: Mitsuba's nearest filter, noted."""
+        t = self.filter.args[0] if self.filter is not None else "gaussian"
+        f = _Params(self.filter, self) if self.filter is not None else None
+        g = (lambda k, dflt: f.one(k, "float", dflt)) if f else (lambda k, dflt: dflt)
+        defaults = {"box": 0.5, "gaussian": 1.5, "mitchell": 2.0, "sinc": 4.0, "triangle": 2.0}
+        if t == "lanczos":      # not a pbrt-v4 name: its windowed sinc is "sinc"
+            self.note(self.filter.where, "PixelFilter: 'lanczos' is pbrt-v3's name of pbrt-v4's 'sinc'")
+            t = "sinc"
+        if t not in defaults:
+            raise XMLError(f"{self.filter.where}: PixelFilter: unknown filter {t!r} "
+                           f"(pbrt-v4's: {', '.join(defaults)})")
+        rx = g("xradius", defaults[t])
+        ry = g("yradius", defaults[t])
+        if not self.mitsuba:
+            out = {"type": t, "xradius": rx, "yradius": ry}
+            if t == "box" and rx == ry == 0.5:
+                return {"type": "box"}                       # Mitsuba's box: the same filter
+            if t == "gaussian":
+                out["sigma"] = g("sigma", 0.5)
+            elif t == "mitchell":
+                out.update(B=g("B", 1.0 / 3.0), C=g("C", 1.0 / 3.0))
+            elif t == "sinc":
+                out["tau"] = g("tau", 3.0)
+            if f:
+                self.warn_unused(f, f"filter {t!r}")
+            return out
+        # Mitsuba 3's filters: one radius, fixed shapes.
         if t == "box":
-            r = f.floats("xradius", [0.5])[0] if f else 0.5
-            if f and (r != 0.5 or f.floats("yradius", [0.5])[0] != 0.5):
-                self.unsupported(self.filter, "a box filter wider than one pixel")
+            if rx != 0.5 or ry != 0.5:
+                self.unsupported(self.filter, "a box filter wider than one pixel in a dict for Mitsuba 3: "
+                                              "Mitsuba's box is used")
             return {"type": "box"}
         if t == "gaussian":
-            sigma = f.one("sigma", "float", 0.5) if f else 0.5
-            r = f.one("xradius", "float", 1.5) if f else 1.5
-            if f and f.has("yradius"):
-                f.p["yradius"].used = True
-            if r != 4 * sigma and self.filter is not None:
-                self.note(self.filter.where, f"PixelFilter: gaussian radius {r} is 4 sigma ({4 * sigma}) in pbr")
+            sigma = g("sigma", 0.5)
+            self.note(self.filter.where if self.filter else f"{self.path}:1",
+                      f"PixelFilter: gaussian of radius {rx} is Mitsuba's, of radius 4 sigma ({4 * sigma})")
             return {"type": "gaussian", "stddev": sigma}
         if t == "triangle":
-            r = f.one("xradius", "float", 2.0) if f else 2.0
-            return {"type": "tent", "radius": r}
-        if t in ("mitchell", "lanczos", "sinc"):
-            self.unsupported(self.filter, f"pixel filter {t!r}: a Gaussian is used")
-            return {"type": "gaussian", "stddev": 0.5}
-        raise XMLError(f"{self.filter.where}: PixelFilter: unknown filter {t!r}")
+            if rx != ry:
+                self.unsupported(self.filter, "a triangle filter of two radii in a dict for Mitsuba 3: xradius is used")
+            return {"type": "tent", "radius": rx}
+        if t == "mitchell" and rx == ry == 2.0:
+            return {"type": "mitchell", "B": g("B", 1.0 / 3.0), "C": g("C", 1.0 / 3.0)}
+        self.unsupported(self.filter, f"pixel filter {t!r} with these parameters in a dict for Mitsuba 3: "
+                                      "a Gaussian is used")
+        return {"type": "gaussian", "stddev": 0.5}
 
     def sensor(self) -> dict:
         d = self.camera
         t = d.args[0] if d else "perspective"
         p = _Params(d, self) if d else None
         ctm = self.camera_ctm[0] if d else np.eye(4)
-        if d and not np.allclose(self.camera_ctm[0], self.camera_ctm[1]):
-            self.unsupported(d, "a moving camera (ActiveTransform EndTime): the start transform is used")
         # pbrt's camera space is left-handed (image x to the right): mirror x for Mitsuba's.
         to_world = np.linalg.inv(ctm) @ _scale(-1, 1, 1)
+        s = {}
+        if d and not np.allclose(self.camera_ctm[0], self.camera_ctm[1]):
+            if self.mitsuba:
+                self.unsupported(d, "a moving camera (ActiveTransform EndTime) in a dict for Mitsuba 3: "
+                                    "the start transform is used")
+            else:
+                # pbrt-v4's animated camera transform: the CTM at TransformTimes' start and end.
+                s["to_world_end"] = _mi_transform(np.linalg.inv(self.camera_ctm[1]) @ _scale(-1, 1, 1))
+                s["transform_times"] = [float(x) for x in self.camera_times]
         _, w, h = self.film_size()
         spp = self.sampler_spp()
         if t in ("perspective", "orthographic"):
-            s = {"type": t, "to_world": _mi_transform(to_world)}
+            s.update(type=t, to_world=_mi_transform(to_world))
+            screen = self.screen_window(p, w, h)
+            lr = p.one("lensradius", "float", 0.0) if p else 0.0
+            fd = p.one("focaldistance", "float", 1e6) if p else 1e6
             if t == "perspective":
-                s.update(fov=p.one("fov", "float", 90.0) if p else 90.0, fov_axis="smaller")
-            else:
-                a = max(w / h, 1.0) if p is None or not p.has("screenwindow") else 1.0
-                s["to_world"] = _mi_transform(to_world @ _scale(a, a, 1))
-            if p:
-                if p.has("screenwindow"):
-                    self.unsupported(d, "'screenwindow'")
-                    p.p["screenwindow"].used = True
-                if p.has("frameaspectratio"):
-                    self.unsupported(d, "'frameaspectratio'")
-                    p.p["frameaspectratio"].used = True
-                lr = p.one("lensradius", "float", 0.0)
-                fd = p.one("focaldistance", "float", 1e6)
+                fov = p.one("fov", "float", 90.0) if p else 90.0
+                if screen is None:
+                    s.update(fov=fov, fov_axis="smaller")
+                else:
+                    # pbrt-v4's screen window [x0, x1] x [y0, y1] (in units of tan(fov / 2)):
+                    # its width and centre as Mitsuba's fov along x and principal point.
+                    x0, x1, y0, y1 = screen
+                    tn = math.tan(math.radians(fov) / 2)
+                    s.update(fov=math.degrees(2 * math.atan((x1 - x0) / 2 * tn)), fov_axis="x")
+                    ppx, ppy = (x0 + x1) / (2 * (x1 - x0)), -(y0 + y1) / (2 * (y1 - y0))
+                    if ppx or ppy:
+                        s.update(principal_point_offset_x=ppx, principal_point_offset_y=ppy)
                 if lr > 0:
-                    if t == "orthographic":
-                        self.unsupported(d, "a thin lens on the orthographic camera")
+                    if "principal_point_offset_x" in s and not self.mitsuba:
+                        s.update(lensradius=lr, focaldistance=fd)      # pbr's perspective: a thin lens, shifted
                     else:
+                        if "principal_point_offset_x" in s:
+                            self.unsupported(d, "a thin lens with an off-centre screen window in a dict for "
+                                                "Mitsuba 3: the centred window is used")
+                            s.pop("principal_point_offset_x"), s.pop("principal_point_offset_y")
                         s.update(type="thinlens", aperture_radius=lr, focus_distance=fd)
+            else:
+                # pbrt-v4's screen window is camera-space x, y; Mitsuba's orthographic
+                # camera sees [-1, 1] x [-h/w, h/w], scaled and moved by to_world.
+                a = w / h
+                x0, x1, y0, y1 = screen or ((-a, a, -1.0, 1.0) if a > 1 else (-1.0, 1.0, -1 / a, 1 / a))
+                m = _translate(-(x0 + x1) / 2, (y0 + y1) / 2, 0) @ _scale((x1 - x0) / 2, a * (y1 - y0) / 2, 1)
+                s["to_world"] = _mi_transform(to_world @ m)
+                if lr > 0:
+                    self.unsupported(d, "a thin lens on the orthographic camera")
+            if p:
                 so, sc = p.one("shutteropen", "float", 0.0), p.one("shutterclose", "float", 1.0)
+                if p.has("shutteropen") or p.has("shutterclose"):
+                    s.update(shutter_open=so, shutter_close=sc)
                 self.warn_unused(p, f"camera {t!r}")
         elif t in ("spherical", "realistic"):
-            if t not in SENSORS:
-                self.unsupported(d, f"camera {t!r} (pbr has no such camera yet): a 90 degree perspective is used")
-                s = {"type": "perspective", "to_world": _mi_transform(to_world), "fov": 90.0, "fov_axis": "smaller"}
+            if not self.pbr_plugin(SENSORS, t):
+                self.unsupported(d, f"camera {t!r} in a dict for Mitsuba 3: a 90 degree perspective is used")
+                s.update(type="perspective", to_world=_mi_transform(to_world), fov=90.0, fov_axis="smaller")
             else:
-                s = self.passthrough(p, t)
+                s.update(self.passthrough(p, t))
                 s["to_world"] = _mi_transform(to_world)
         else:
             raise XMLError(f"{d.where}: Camera: unknown camera {t!r} (pbrt-v4's: perspective, orthographic, "
@@ -1554,7 +1684,33 @@ class PBRTScene:
         s["sampler"] = {"type": "independent", "sample_count": spp}
         if self.camera_medium:
             s["medium"] = {"type": "ref", "id": self.media[self.camera_medium]}
-        return s
+        return {"type": s.pop("type"), **s}
+
+    def screen_window(self, p, w, h):
+        """pbrt-v4's screen window (x0, x1, y0, y1) when ``screenwindow`` or
+        ``frameaspectratio`` is given (None: the default window of the film's aspect).
+        Mitsuba's cameras have square pixels: a window whose aspect is not the film's is
+        refused (``approximate``: its x extent is kept)."""
+        if p is None or not (p.has("screenwindow") or p.has("frameaspectratio")):
+            return None
+        frame = p.one("frameaspectratio", "float", w / h)
+        if not frame > 0:
+            raise p.error("frameaspectratio", f"must be positive, got {frame}")
+        sw = p.floats("screenwindow")
+        if sw is None:
+            sw = [-frame, frame, -1.0, 1.0] if frame > 1 else [-1.0, 1.0, -1 / frame, 1 / frame]
+        elif len(sw) != 4:
+            raise p.error("screenwindow", f"expected 4 values x0 x1 y0 y1, got {len(sw)}")
+        x0, x1, y0, y1 = sw
+        if not (x1 != x0 and y1 != y0):
+            raise p.error("screenwindow", f"the window is empty: {sw}")
+        if not math.isclose((x1 - x0) / (y1 - y0), w / h, rel_tol=1e-4):
+            self.unsupported(p.d, f"a screen window of aspect {(x1 - x0) / (y1 - y0):.4g} on a film of aspect "
+                                  f"{w / h:.4g} (non-square pixels): a window of the film's aspect around the same "
+                                  "centre, as wide, is used")
+            cy, hy = (y0 + y1) / 2, (x1 - x0) * h / w / 2 * (1 if y1 > y0 else -1)
+            y0, y1 = cy - hy, cy + hy
+        return x0, x1, y0, y1
 
     def sampler_spp(self) -> int:
         spp = 16
@@ -1722,22 +1878,28 @@ def equal_area_to_latlong(img: np.ndarray, height: int | None = None) -> np.ndar
 
 @backend.uses_pbr_variant
 def convert(path: str, approximate: bool = False, mesh_dir: str | None = None, skip_missing: bool = False,
-            **overrides):
+            mitsuba: bool = False, **overrides):
     """(scene dict, notes, key path -> ``file:line``) of a pbrt-v4 file (see :func:`to_dict`).
     ``notes``: ``file:line: ...`` messages on what was ignored or approximated;
-    ``skip_missing``: leave out objects whose files are missing, with a note."""
+    ``skip_missing``: leave out objects whose files are missing, with a note;
+    ``mitsuba``: keep to Mitsuba 3's plugins (hdrfilm, its filters, bitmap and its
+    checkerboard, a static camera), so that ``mi.load_dict`` renders the dict; what
+    Mitsuba lacks is refused (``approximate``: substituted, noted). By default pbrt-v4's
+    filters, films, cameras, camera motion and textures map to pbr's plugins of pbrt-v4's
+    names, so the image is pbrt-v4's."""
     backend.ensure()   # transforms are Mitsuba objects: a variant must be set
     unknown = set(overrides) - {"spp", "res", "width", "height", "maxdepth"}
     if unknown:
         raise XMLError(f"{path}:0: unknown override(s) {sorted(unknown)} (pbrt scenes take spp, res, width, "
                        "height, maxdepth)")
-    c = PBRTScene(path, approximate, mesh_dir, overrides, skip_missing)
+    c = PBRTScene(path, approximate, mesh_dir, overrides, skip_missing, mitsuba)
     d = c.read()
     return d, c.notes, c.lines
 
 
 @backend.uses_pbr_variant
-def to_dict(path: str, approximate: bool = False, mesh_dir: str | None = None, **overrides) -> dict:
+def to_dict(path: str, approximate: bool = False, mesh_dir: str | None = None, mitsuba: bool = False,
+            **overrides) -> dict:
     """A pbr/Mitsuba scene dict of the pbrt-v4 scene file ``path``.
 
     ``overrides``: ``spp``, ``res`` (image width, aspect kept) or ``width``/``height``,
@@ -1746,4 +1908,4 @@ def to_dict(path: str, approximate: bool = False, mesh_dir: str | None = None, *
     ``mesh_dir`` (default: a ``pbr-pbrt-meshes`` folder in the temporary directory), so
     the dict can be saved as Mitsuba XML (``pbr.scene.xml.to_xml``); volume grids stay
     numpy arrays."""
-    return convert(path, approximate, mesh_dir, **overrides)[0]
+    return convert(path, approximate, mesh_dir, mitsuba=mitsuba, **overrides)[0]
