@@ -275,7 +275,7 @@ class PRBVolPathIntegrator(_MediumAware):
             bs = dr.detach(bs)
             sray, s_med = volume.shadow_ray(scene, shape, si, ls, sc, p_sc, medium, nee & rs)
             nee &= ls.pdf > 0
-            state = (type(rng.state)(rng.state), type(rng.inc)(rng.inc))
+            state = rng.copy()
             T_sh, _ = self._transmittance(scene, rng, sray, ls.p, s_med, wl, PRIMAL, dL, dL, dL_fwd, nee)
             if primal:
                 L = L + dr.detach(Ld_unocc) * T_sh
@@ -283,8 +283,7 @@ class PRBVolPathIntegrator(_MediumAware):
                 Ld = dr.detach(Ld_unocc) * T_sh
                 L = L - Ld
                 # Replay the shadow ray's random numbers for the transmittance derivative.
-                rng2 = type(rng)()
-                rng2.state, rng2.inc = type(state[0])(state[0]), type(state[1])(state[1])
+                rng2 = state.copy()
                 _, dL_fwd = self._transmittance(scene, rng2, sray, ls.p, s_med, wl, mode, dL, Ld, dL_fwd, nee)
 
             # -- continue: BSDF or phase function sampling ----------------------------------------
