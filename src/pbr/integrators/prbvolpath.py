@@ -259,9 +259,9 @@ class PRBVolPathIntegrator(_MediumAware):
             nee = (rs & bsdfs.smooth(bsdf_id, rs)) | sc
             ref = volume.nee_reference(si, sc, p_sc)
             u_light = rng.next_float32()
-            u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u_pos = rng.next_2d()
             u1 = rng.next_float32()
-            u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u2 = rng.next_2d()
             with dr.resume_grad(when=not primal):
                 ls = lights.sample_Li(self.light_sampler, ref, u_light, u_pos, wl, nee)
                 wo_em = si.to_local(ls.wi)
