@@ -39,18 +39,21 @@ class HaltonStream(SampleStream):
 
     def pixel_2d(self):
         # Dimensions 0 and 1 (bases 2 and 3) without their first digits, which the index
-        # was chosen to make the pixel's coordinates: the position inside the pixel.
-        x = radical_inverse(self.index >> self.exp2, mi.UInt32(2))
-        y = radical_inverse(self.index // self.scale3, mi.UInt32(3))
-        return mi.Point2f(x, y)
+        # was chosen to make the pixel's coordinates: the position inside the pixel,
+        # randomised like the other dimensions (pbrt-v4 leaves it unscrambled; scrambled,
+        # renders with different seeds are independent estimates, as pbr.validate needs).
+        return mi.Point2f(self._sample(self.index >> self.exp2, mi.UInt32(2), 0),
+                          self._sample(self.index // self.scale3, mi.UInt32(3), 1))
 
     def next_1d(self):
         d = dr.select(self.dim >= PRIMES, 2, self.dim)
         self.dim = d + 1
-        base = dr.gather(mi.UInt32, _prime_table(mi.variant()), d)
+        return self._sample(self.index, dr.gather(mi.UInt32, _prime_table(mi.variant()), d), d)
+
+    def _sample(self, index, base, d):
         r = self.randomization
         h = hash_u32(d, self.seed)
-        u = radical_inverse(self.index, base, perm_seed=h if r == "permutedigits" else None,
+        u = radical_inverse(index, base, perm_seed=h if r == "permutedigits" else None,
                             owen_seed=h if r == "owen" else None)
         return cranley_patterson(u, d, self.seed) if r == "cranleypatterson" else u
 

@@ -53,10 +53,12 @@ class SobolStream(SampleStream):
     # 2^m x 2^m pixels), nbits (index bits), randomization
 
     def pixel_2d(self):
-        # Dimensions 0 and 1, unscrambled: their first m digits are the pixel's coordinates
-        # (the index was chosen so), the digits after them the position inside the pixel.
-        m = self.m
-        u = [u32_to_unit(sobol_bits(self.index, d, self.nbits) << m) for d in (0, 1)]
+        # Dimensions 0 and 1: their first m digits are the pixel's coordinates (the index
+        # was chosen so), the digits after them the position inside the pixel, which is
+        # randomised like the other dimensions (pbrt-v4 leaves it unscrambled; scrambled,
+        # renders with different seeds are independent estimates, as pbr.validate needs).
+        m, r = self.m, self.randomization
+        u = [_randomize(sobol_bits(self.index, d, self.nbits) << m, d, self.seed, r) for d in (0, 1)]
         return mi.Point2f(u[0], u[1])
 
     def next_1d(self):
