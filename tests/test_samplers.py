@@ -423,3 +423,11 @@ def test_bad_sampler_parameters_name_their_key(params, match):
     d["sensor"]["sampler"] = params
     with pytest.raises(pbr.SceneError, match=match):
         pbr.load_dict(d)
+
+
+def test_scene_dicts_with_samplers_round_trip_through_xml():
+    for kind in LD_SAMPLERS:
+        d = scene_dict(kind, spp=16, res=8)
+        text = pbr.scene.xml.to_xml(d)
+        assert f'<sampler type="{kind}"' in text
+        assert type(pbr.load_string(text).sensors[0].sampler).name == kind

@@ -24,6 +24,7 @@ depend on the seed at all).
 
 from __future__ import annotations
 
+import functools
 import warnings
 
 import drjit as dr
@@ -113,8 +114,13 @@ def _copy(v):
 def stream_class(base: type, **constants) -> type:
     """A subclass of ``base`` with ``constants`` as class attributes (the per-render
     constants of a stream: Dr.Jit rebuilds loop state with ``type(stream)()``, which
-    keeps class attributes and drops instance ones)."""
-    return type(base.__name__, (base,), constants)
+    keeps class attributes and drops instance ones); one class per set of constants."""
+    return _stream_class(base, tuple(sorted(constants.items())))
+
+
+@functools.lru_cache(maxsize=None)
+def _stream_class(base: type, constants: tuple) -> type:
+    return type(base.__name__, (base,), dict(constants))
 
 
 class Sampler:
