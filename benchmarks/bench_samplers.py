@@ -15,18 +15,21 @@ Scenes (``--res`` pixels square; box filter, so that a pixel's integrand is its 
 - ``medium``: the Cornell box with a scattering fog cube (``volpath``, max_depth 8).
 
 Error: ``relMSE = mean of (x - r)^2 / (r^2 + 0.01)`` (``pbr.validate.relative_mse``) against
-a reference ``r`` rendered with ``zsobol`` at ``--ref-spp`` in 16 batches (other seeds);
-the reference's own noise (``floor``, from its batches) is subtracted. Each point is the
-mean over ``--reps`` images (other seeds) up to 64 spp, one image above.
+a reference ``r`` rendered with ``--ref-sampler`` (``sobol``, the fastest to converge) at
+``--ref-spp`` in 16 batches (other seeds); the reference's own noise (``floor``, from
+its batches) is subtracted. Each point is the mean over ``--reps`` images (other seeds)
+up to 64 spp, one image above; ``spp`` is what the sampler rendered (ldsampler and
+multijitter round some counts up).
 
-Slope: least-squares slope of log relMSE vs log spp over spp >= 16 (independent sampling
-gives -1; randomised (0,2)-sequences reach -1.5 on discontinuous and -2 or below on
-smooth low-dimensional integrands). Equal time: each sampler's warm render time per spp
+Slope: least-squares slope of log relMSE vs log spp over spp >= 16, leaving out points
+whose raw error is under 4x the reference's floor (not measurable against it).
+Independent sampling gives -1; randomised low-discrepancy points reach -1.5 on
+discontinuous and -2 or below on smooth low-dimensional integrands. Equal time: each sampler's warm render time per spp
 (median of repeats at 256 spp, compile time excluded: ``bench_integrators.timed_render``)
 gives the spp it affords in the time ``independent`` takes for 256 spp, and its relMSE
 there (log-log interpolation on its curve).
 
-    python benchmarks/bench_samplers.py [--res 32] [--max-spp 4096] [--ref-spp 65536]
+    python benchmarks/bench_samplers.py [--res 32] [--max-spp 4096] [--ref-spp 65536] [--ref-sampler sobol]
         [--scenes direct,textured,cornell,envglossy,medium] [--samplers independent,zsobol]
         [--reps 4] [--out out/bench_samplers] [--from-csv out/bench_samplers.csv]
 
@@ -44,6 +47,7 @@ import math
 import os
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -137,30 +141,36 @@ def with_sampler(d: dict, sampler: str) -> dict:
     return d
 
 
-def reference(name, d, res, spp, cache: Path):
-    """(mean, variance of the mean) of ``zsobol`` at ``spp`` in 16 batches, cached."""
-    key = hashlib.sha1(repr((CACHE_VERSION, name, res, spp, sorted((k, repr(v)) for k, v in d.items())))
+def reference(name, d, res, spp, sampler, cache: Path):
+    """(mean, variance of the mean) of ``sampler`` at ``spp`` in 16 batches, cached."""
+    key = hashlib.sha1(repr((CACHE_VERSION, name, res, spp, sampler, sorted((k, repr(v)) for k, v in d.items())))
                        .encode()).hexdigest()[:12]
     f = cache / f"samplers_ref_{name}_{res}_{spp}_{key}.npz"
     if f.exists():
         z = np.load(f)
         return z["mean"], z["var"]
-    scene = pbr.load_dict(with_sampler(d, "zsobol"))
+    scene = pbr.load_dict(with_sampler(d, sampler))
     t = time.perf_counter()
     est = validate.estimate(lambda seed, spp: pbr.render(scene, spp=spp, seed=seed, progress=False),
                             spp, batches=REF_BATCHES, seed=9)
-    print(f"  reference {name}: zsobol {spp} spp in {time.perf_counter() - t:.1f} s", flush=True)
+    print(f"  reference {name}: {sampler} {spp} spp in {time.perf_counter() - t:.1f} s", flush=True)
     f.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(f, mean=est[0], var=est[1])
     return est[0], est[1]
 
 
-def fit_slope(spps, errors, min_spp=16):
-    pts = [(math.log(s), math.log(e)) for s, e in zip(spps, errors) if s >= min_spp and e > 0]
+def fit_slope(spps, errors, min_spp=16, usable=None):
+    usable = usable or [True] * len(spps)
+    pts = [(math.log(s), math.log(e)) for s, e, u in zip(spps, errors, usable) if s >= min_spp and e > 0 and u]
     if len(pts) < 2:
         return float("nan")
     x, y = np.array(pts).T
     return float(np.polyfit(x, y, 1)[0])
+
+
+def curve_slope(c):
+    return fit_slope([r["spp"] for r in c], [r["relmse"] for r in c],
+                     usable=[r["relmse_raw"] > 4 * r["floor"] for r in c])
 
 
 def interp_loglog(spps, errors, s):
@@ -177,7 +187,7 @@ def run(a):
     rows, timing = [], {}
     for name in a.scenes:
         d = scene_dict(name, a.res, cache)
-        ref, var = reference(name, d, a.res, a.ref_spp, cache)
+        ref, var = reference(name, d, a.res, a.ref_spp, a.ref_sampler, cache)
         floor = floor_of(ref, var)
         print(f"{name}: reference floor {floor:.3g}", flush=True)
         for sampler in a.samplers:
@@ -188,17 +198,19 @@ def run(a):
             while spp <= a.max_spp:
                 reps = a.reps if spp <= 64 else 1
                 raws = []
-                for r in range(reps):
-                    img = np.asarray(pbr.render(scene, spp=spp, seed=100 + r, progress=False), np.float64)
-                    raws.append(validate.relative_mse(img, ref, RELMSE_EPS))
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", RuntimeWarning)   # rounded sample counts
+                    for r in range(reps):
+                        img = np.asarray(pbr.render(scene, spp=spp, seed=100 + r, progress=False), np.float64)
+                        raws.append(validate.relative_mse(img, ref, RELMSE_EPS))
                 raw = float(np.mean(raws))
-                rows.append({"scene": name, "sampler": sampler, "spp": spp, "relmse": max(raw - floor, 1e-12),
-                             "relmse_raw": raw, "floor": floor, "s_per_spp": t_eq / a.time_spp})
+                rows.append({"scene": name, "sampler": sampler, "spp": scene.sensors[0].sampler.round_spp(spp),
+                             "relmse": max(raw - floor, 1e-12), "relmse_raw": raw, "floor": floor,
+                             "s_per_spp": t_eq / a.time_spp})
                 spp *= 4
             last = [r for r in rows if r["scene"] == name and r["sampler"] == sampler]
             print(f"  {sampler:12s} " + " ".join(f"{r['relmse']:.2e}" for r in last)
-                  + f"  slope {fit_slope([r['spp'] for r in last], [r['relmse'] for r in last]):+.2f}"
-                  + f"  {1e3 * t_eq / a.time_spp:.2f} ms/spp", flush=True)
+                  + f"  slope {curve_slope(last):+.2f}  {1e3 * t_eq / a.time_spp:.2f} ms/spp", flush=True)
     return rows
 
 
@@ -218,7 +230,7 @@ def analyse(rows, time_spp=256):
         for sampler, c in curves.items():
             spps, errs = [r["spp"] for r in c], [r["relmse"] for r in c]
             e256 = interp_loglog(spps, errs, time_spp)
-            res = {"slope": fit_slope(spps, errs), f"relmse_{time_spp}spp": e256,
+            res = {"slope": curve_slope(c), f"relmse_{time_spp}spp": e256,
                    "ms_per_spp": 1e3 * c[0]["s_per_spp"]}
             if base:
                 b256 = interp_loglog([r["spp"] for r in base], [r["relmse"] for r in base], time_spp)
@@ -275,6 +287,7 @@ def main(argv=None):
     p.add_argument("--res", type=int, default=32)
     p.add_argument("--max-spp", type=int, default=4096)
     p.add_argument("--ref-spp", type=int, default=65536)
+    p.add_argument("--ref-sampler", default="sobol")
     p.add_argument("--time-spp", type=int, default=256)
     p.add_argument("--reps", type=int, default=4)
     p.add_argument("--scenes", default=",".join(SCENES))

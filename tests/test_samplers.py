@@ -17,7 +17,7 @@ from pbr.plugins.props import Props
 from pbr.samplers import SAMPLERS, seed_array
 from pbr.samplers import lowdiscrepancy as ld
 
-LD_SAMPLERS = ["stratified", "multijitter", "ldsampler", "sobol", "paddedsobol", "zsobol", "halton"]
+LD_SAMPLERS = ["stratified", "multijitter", "orthogonal", "ldsampler", "sobol", "paddedsobol", "zsobol", "halton"]
 
 
 def make(name, **params):
@@ -182,6 +182,25 @@ def test_multijitter_is_stratified_in_2d_and_in_each_projection():
     # the independent sampler is not (the check can fail)
     ind = draws("independent", n, pattern="2")
     assert not all(strata_unique(p[:, 0], n) for p in ind)
+
+
+def test_orthogonal_arrays_stratify_every_pair_of_dimensions():
+    """Strength 2 over p = 5 (25 spp): every draw is a Latin hypercube of 25 strata, every
+    pair of draws of a round (p + 1 = 6 draws) has one sample in each 5 x 5 cell; the next
+    round too."""
+    p, n = 5, 25
+    d = draws("orthogonal", n, pattern="1" * 12, sample_count=n)
+    for pixel in d:
+        for j in range(12):
+            assert strata_unique(pixel[:, j], n)
+        for r in (0, 6):
+            for j in range(r, r + 6):
+                for k in range(j + 1, r + 6):
+                    cells = np.floor(pixel[:, j] * p) * p + np.floor(pixel[:, k] * p)
+                    assert len(np.unique(cells)) == n, (j, k)
+    # Mitsuba's rounding: the square of the next prime
+    with pytest.warns(RuntimeWarning, match="rounded to 25"):
+        assert make("orthogonal", sample_count=10).sample_count == 25
 
 
 # ------------------------------------------------------------------ randomisation (chi^2)
@@ -417,6 +436,7 @@ def test_sample_counts_are_rounded_with_a_warning(type, asked, rounded):
     ({"type": "zsobol", "sample_count": 16, "pixelsamples": 16}, r"sensor\.sampler\.sample_count.*not both"),
     ({"type": "stratified", "sample_count": 16, "xsamples": 4}, r"sensor\.sampler\.xsamples"),
     ({"type": "multijitter", "strength": 2}, r"sensor\.sampler.*strength"),
+    ({"type": "orthogonal", "strength": 3}, r"sensor\.sampler\.strength: only strength 2"),
 ])
 def test_bad_sampler_parameters_name_their_key(params, match):
     d = pbr.cornell_box(8, 4)

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
+
 import mitsuba as mi
 
 from .base import SAMPLERS, SampleStream, Sampler, hash_u32, stream_class
@@ -152,3 +154,73 @@ class MultijitterSampler(Sampler):
     def start(self, pixel, index, spp, size, seed):
         nx = max(d for d in range(1, math.isqrt(spp) + 1) if spp % d == 0)
         return _start(self, MultijitterStream, pixel, index, spp, seed, nx=nx, ny=spp // nx)
+
+
+def _is_prime(n: int) -> bool:
+    return n >= 2 and all(n % k for k in range(2, math.isqrt(n) + 1))
+
+
+class OrthogonalStream(StratifiedStream):
+    """Orthogonal-array draws (Bose's construction of strength 2 over a prime p): sample
+    i = (a0, a1) in base p has in column c = 0, 1, ..., p the level a0, a1, a0 + (c-1) a1
+    (mod p); any two columns take every pair of levels once. A 1D draw is one column's
+    level, refined by the next column's (shuffled: a Latin hypercube of p^2 strata); two
+    consecutive draws are stratified jointly in a p x p grid, as multi-jittered points.
+    After p + 1 draws the columns are reused with the samples reshuffled (a new round)."""
+
+    next_2d = SampleStream.next_2d      # two consecutive columns: stratified in p x p
+
+    def next_1d(self):
+        p, cols = self.p, self.p + 1
+        c = self.dim % cols
+        rnd = self.dim // cols
+        key = hash_u32(self.key, self.dim, 4)
+        self.dim = self.dim + 1
+        i = mi.permute_kensler(self.index, self.count, hash_u32(self.key, rnd, 5))
+        a0 = i // p
+        a1 = i - a0 * p
+
+        def level(col):
+            return dr.select(col == 0, a0, dr.select(col == 1, a1, (a0 + (col - 1) * a1) % p))
+        stratum = mi.permute_kensler(level(c), p, hash_u32(key, 0x51633E2D))
+        sub = mi.permute_kensler(level((c + 1) % cols), p, hash_u32(key, 0x68BC21EB))
+        return (mi.Float(stratum) + (mi.Float(sub) + self._jitter()) * (1.0 / p)) * (1.0 / p)
+
+
+@SAMPLERS.register("orthogonal")
+class OrthogonalSampler(Sampler):
+    """``orthogonal``: Mitsuba's orthogonal array sampler (Jarosz et al. 2019), strength 2:
+    every pair of dimensions within a round of p + 1 draws is stratified like correlated
+    multi-jittered points, and every dimension in p^2 strata. Mitsuba reuses the array's
+    columns past p + 1 dimensions (dimension j and j + p then share their strata up to a
+    permutation); pbr starts a new round with the samples reshuffled instead.
+
+    ============  ====  =======  ================================================================
+    name          type  default  meaning
+    ============  ====  =======  ================================================================
+    sample_count  int   4        samples per pixel, rounded up to the square of a prime
+    strength      int   2        the array's strength (2 only: Bose's construction)
+    jitter        bool  true     a random position inside each sub-stratum (else its centre)
+    seed          int   0        offset added to the seed a render is given
+    ============  ====  =======  ================================================================
+    """
+
+    name = "orthogonal"
+
+    def __init__(self, props=None):
+        super().__init__(props)
+        self.jitter = props.bool("jitter", True) if props else True
+        if props and props.int("strength", 2) != 2:
+            raise props.error("strength", "only strength 2 is supported (Bose's construction)")
+        if props:
+            props.finish()
+
+    def round_spp(self, spp, warn=False):
+        p = 2
+        while p * p < spp or not _is_prime(p):
+            p += 1
+        return self._rounded(spp, p * p, "the square of a prime as sample count", warn)
+
+    def start(self, pixel, index, spp, size, seed):
+        p = math.isqrt(spp)
+        return _start(self, OrthogonalStream, pixel, index, spp, seed, p=p, nx=p, ny=p)
