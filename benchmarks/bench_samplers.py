@@ -27,13 +27,16 @@ Independent sampling gives -1; randomised low-discrepancy points reach -1.5 on
 discontinuous and -2 or below on smooth low-dimensional integrands. Equal time: each sampler's warm render time per spp
 (median of repeats at 256 spp, compile time excluded: ``bench_integrators.timed_render``)
 gives the spp it affords in the time ``independent`` takes for 256 spp, and its relMSE
-there (log-log interpolation on its curve).
+there (log-log interpolation on its curve). Times are process CPU time (all threads):
+under other jobs' load it repeats far better than wall-clock time; ``--retime CSV``
+measures them again for the rows of an earlier run.
 
     python benchmarks/bench_samplers.py [--res 32] [--max-spp 4096] [--ref-spp 65536] [--ref-sampler sobol]
         [--scenes direct,textured,cornell,envglossy,medium] [--samplers independent,zsobol]
         [--reps 4] [--out out/bench_samplers] [--from-csv out/bench_samplers.csv]
+        [--retime out/bench_samplers.csv]
 
-Writes ``<out>.csv``, ``<out>.json`` (slopes, equal-time relMSE) and, with matplotlib
+Writes ``<out>.csv``, ``<out>.json`` and ``<out>.md`` (slopes, equal-time relMSE) and, with matplotlib
 (``pip install -e '.[bench]'``), ``<out>.png``.
 """
 
@@ -184,7 +187,7 @@ def interp_loglog(spps, errors, s):
 
 def run(a):
     cache = Path(a.cache)
-    rows, timing = [], {}
+    rows = []
     for name in a.scenes:
         d = scene_dict(name, a.res, cache)
         ref, var = reference(name, d, a.res, a.ref_spp, a.ref_sampler, cache)
@@ -192,8 +195,7 @@ def run(a):
         print(f"{name}: reference floor {floor:.3g}", flush=True)
         for sampler in a.samplers:
             scene = pbr.load_dict(with_sampler(d, sampler))
-            _, t_eq, _, _ = timed_render(scene, a.time_spp, seed=1, repeat_below=1e9, repeats=3)
-            timing[(name, sampler)] = t_eq / a.time_spp
+            _, t_eq, cpu_eq, _ = timed_render(scene, a.time_spp, seed=1, repeat_below=1e9, repeats=3)
             spp = 1
             while spp <= a.max_spp:
                 reps = a.reps if spp <= 64 else 1
@@ -206,7 +208,7 @@ def run(a):
                 raw = float(np.mean(raws))
                 rows.append({"scene": name, "sampler": sampler, "spp": scene.sensors[0].sampler.round_spp(spp),
                              "relmse": max(raw - floor, 1e-12), "relmse_raw": raw, "floor": floor,
-                             "s_per_spp": t_eq / a.time_spp})
+                             "s_per_spp": t_eq / a.time_spp, "cpu_s_per_spp": cpu_eq / a.time_spp})
                 spp *= 4
             last = [r for r in rows if r["scene"] == name and r["sampler"] == sampler]
             print(f"  {sampler:12s} " + " ".join(f"{r['relmse']:.2e}" for r in last)
@@ -225,17 +227,18 @@ def analyse(rows, time_spp=256):
             if r["scene"] == name:
                 curves.setdefault(r["sampler"], []).append(r)
         base = curves.get("independent")
-        t_budget = base[0]["s_per_spp"] * time_spp if base else None
+        key = "cpu_s_per_spp" if base and "cpu_s_per_spp" in base[0] else "s_per_spp"
+        t_budget = base[0][key] * time_spp if base else None
         out[name] = {}
         for sampler, c in curves.items():
             spps, errs = [r["spp"] for r in c], [r["relmse"] for r in c]
             e256 = interp_loglog(spps, errs, time_spp)
             res = {"slope": curve_slope(c), f"relmse_{time_spp}spp": e256,
-                   "ms_per_spp": 1e3 * c[0]["s_per_spp"]}
+                   "ms_per_spp": 1e3 * c[0][key]}
             if base:
                 b256 = interp_loglog([r["spp"] for r in base], [r["relmse"] for r in base], time_spp)
                 res[f"gain_{time_spp}spp"] = b256 / e256
-                spp_eq = t_budget / c[0]["s_per_spp"]
+                spp_eq = t_budget / c[0][key]
                 res["spp_at_equal_time"] = spp_eq
                 res["relmse_equal_time"] = interp_loglog(spps, errs, spp_eq)
                 res["gain_equal_time"] = b256 / res["relmse_equal_time"]
@@ -253,6 +256,20 @@ def print_table(summary, time_spp=256):
                   f"({r.get('gain_equal_time', float('nan')):5.1f}x)  {r['ms_per_spp']:.2f}")
 
 
+def markdown(summary, time_spp=256) -> str:
+    """The summary as Markdown tables (one per scene), best relMSE at 256 spp first."""
+    out = []
+    for name, per in summary.items():
+        out += [f"**{name}**", "", f"| sampler | slope | relMSE at {time_spp} spp | lower than independent | "
+                "relMSE at equal time | lower than independent | ms CPU per spp |", "|---|---|---|---|---|---|---|"]
+        for sampler, r in sorted(per.items(), key=lambda kv: kv[1][f"relmse_{time_spp}spp"]):
+            out.append(f"| {sampler} | {r['slope']:+.2f} | {r[f'relmse_{time_spp}spp']:.2e} | "
+                       f"{r.get(f'gain_{time_spp}spp', float('nan')):.1f}x | {r.get('relmse_equal_time', float('nan')):.2e} | "
+                       f"{r.get('gain_equal_time', float('nan')):.1f}x | {r['ms_per_spp']:.2f} |")
+        out.append("")
+    return "\n".join(out)
+
+
 def plot(rows, summary, path):
     plt = pyplot()
     if plt is None:
@@ -266,6 +283,13 @@ def plot(rows, summary, path):
             ls = "--" if sampler == "independent" else "-"
             ax.loglog([r["spp"] for r in c], [r["relmse"] for r in c], ls, marker=".",
                       label=f"{sampler} ({summary[name][sampler]['slope']:+.2f})")
+        base = [r for r in rows if r["scene"] == name and r["sampler"] == "independent"]
+        if base:    # guides: slopes -1 and -2 through independent's 16-spp point
+            x0, y0 = next(((r["spp"], r["relmse"]) for r in base if r["spp"] >= 16), (base[0]["spp"], base[0]["relmse"]))
+            xs = np.array([x0, max(r["spp"] for r in base)], float)
+            for k in (1, 2):
+                ax.loglog(xs, y0 * (xs / x0) ** -k, ":", color="grey", lw=0.8)
+                ax.annotate(f"-{k}", (xs[1], y0 * (xs[1] / x0) ** -k), fontsize=7, color="grey")
         ax.set_title(name)
         ax.set_xlabel("samples per pixel")
         ax.grid(True, which="both", alpha=0.3)
@@ -276,10 +300,35 @@ def plot(rows, summary, path):
     print(f"wrote {path}")
 
 
+def retime(rows, a):
+    """Measure each (scene, sampler)'s CPU time per spp again (``cpu_s_per_spp``)."""
+    cache = Path(a.cache)
+    for name in dict.fromkeys(r["scene"] for r in rows):
+        d = scene_dict(name, a.res, cache)
+        for sampler in dict.fromkeys(r["sampler"] for r in rows if r["scene"] == name):
+            scene = pbr.load_dict(with_sampler(d, sampler))
+            timed_render(scene, a.time_spp, seed=1, repeat_below=0.0, repeats=1)     # compile
+            _, wall, cpu, _ = timed_render(scene, a.time_spp, seed=1, repeat_below=1e9, repeats=3)
+            print(f"  {name} {sampler}: {1e3 * cpu / a.time_spp:.2f} ms CPU per spp "
+                  f"({1e3 * wall / a.time_spp:.2f} ms wall)", flush=True)
+            for r in rows:
+                if r["scene"] == name and r["sampler"] == sampler:
+                    r["cpu_s_per_spp"] = cpu / a.time_spp
+    return rows
+
+
 def read_csv(path):
     with open(path) as f:
         return [{k: (v if k in ("scene", "sampler") else (int(v) if k == "spp" else float(v))) for k, v in r.items()}
                 for r in csv.DictReader(f)]
+
+
+def write_csv(rows, path):
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
 
 
 def main(argv=None):
@@ -296,24 +345,27 @@ def main(argv=None):
     p.add_argument("--cache", default=str(HERE / ".cache"))
     p.add_argument("--out", default="out/bench_samplers")
     p.add_argument("--from-csv", default=None)
+    p.add_argument("--retime", default=None, help="CSV of an earlier run: measure its CPU times again")
     a = p.parse_args(argv)
     a.scenes, a.samplers = a.scenes.split(","), a.samplers.split(",")
-    if a.from_csv:
+    if a.retime:
+        pbr.set_backend(a.backend)
+        rows = retime(read_csv(a.retime), a)
+        write_csv(rows, a.out + ".csv")
+    elif a.from_csv:
         rows = read_csv(a.from_csv)
     else:
         pbr.set_backend(a.backend)
         print(f"backend {a.backend}, load {os.getloadavg()[0]:.1f}, {a.res}x{a.res}", flush=True)
         rows = run(a)
-        Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-        with open(a.out + ".csv", "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
+        write_csv(rows, a.out + ".csv")
     summary = analyse(rows, a.time_spp)
     print_table(summary, a.time_spp)
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
     with open(a.out + ".json", "w") as f:
         json.dump(summary, f, indent=1)
+    with open(a.out + ".md", "w") as f:
+        f.write(markdown(summary, a.time_spp))
     plot(rows, summary, a.out + ".png")
 
 
