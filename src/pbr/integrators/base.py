@@ -174,18 +174,19 @@ class SamplingIntegrator:
         memory.check_render(w, h, per_pass, 4, f"sensor {sensor}")
         return cam, w, h, spp, per_pass, spp // per_pass
 
-    def _camera_samples(self, cam, w, h, spp, per_pass, pass_index, seed, sampler=None):
+    def _camera_samples(self, cam, w, h, spp, per_pass, pass_index, seed, sampler=None, pixel=None, index=None):
         """Rays, wavelengths, filter weights and sample streams of one pass: the camera's
         sampler (or ``sampler``) starts a stream per (pixel, sample index), which gives the
         wavelength (1D), the filter's position in the pixel (2D) and the lens (2D), in
-        pbrt-v4's order; the integrator draws the rest from it."""
-        n = w * h * per_pass
-        idx = dr.arange(mi.UInt32, n)
-        pixel = idx // per_pass
-        sub = idx - pixel * per_pass
-        p_index = dr.opaque(mi.UInt32, pass_index)
+        pbrt-v4's order; the integrator draws the rest from it. A pass is every pixel's
+        samples ``pass_index * per_pass`` onward, pixel-major, unless ``pixel`` and
+        ``index`` (per-lane ``mi.UInt32``, index < spp) name the samples (adaptive passes)."""
+        if pixel is None:
+            idx = dr.arange(mi.UInt32, w * h * per_pass)
+            pixel = idx // per_pass
+            index = dr.opaque(mi.UInt32, pass_index) * per_pass + (idx - pixel * per_pass)
         sampler = sampler or cam.sampler
-        rng = sampler.start(pixel, p_index * per_pass + sub, spp, (w, h), seed_array(seed))
+        rng = sampler.start(pixel, index, spp, (w, h), seed_array(seed))
         wl = SampledWavelengths.sample_visible(rng.next_1d())
         off, weight = cam.film.rfilter.sample(rng.pixel_2d())
         px = mi.Float(pixel % w) + 0.5 + off.x
