@@ -276,8 +276,12 @@ def plot(rows, summary, path):
         print("matplotlib not installed: no plot (pip install -e '.[bench]')")
         return
     scenes = list(summary)
-    fig, axes = plt.subplots(1, len(scenes), figsize=(4.2 * len(scenes), 4.0), squeeze=False)
-    for ax, name in zip(axes[0], scenes):
+    ncols = min(3, len(scenes))
+    nrows = -(-len(scenes) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 4.2 * nrows), squeeze=False)
+    for ax in axes.ravel()[len(scenes):]:
+        ax.axis("off")
+    for ax, name in zip(axes.ravel(), scenes):
         for sampler in summary[name]:
             c = [r for r in rows if r["scene"] == name and r["sampler"] == sampler]
             ls = "--" if sampler == "independent" else "-"
@@ -294,7 +298,8 @@ def plot(rows, summary, path):
         ax.set_xlabel("samples per pixel")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
-    axes[0][0].set_ylabel("relMSE")
+    for row in axes:
+        row[0].set_ylabel("relMSE")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     print(f"wrote {path}")
