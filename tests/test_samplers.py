@@ -451,3 +451,29 @@ def test_scene_dicts_with_samplers_round_trip_through_xml():
         text = pbr.scene.xml.to_xml(d)
         assert f'<sampler type="{kind}"' in text
         assert type(pbr.load_string(text).sensors[0].sampler).name == kind
+
+
+def test_bench_samplers_fits_slopes_and_equal_time():
+    """The benchmark's analysis on synthetic curves: relMSE = c spp^-k gives slope -k; a
+    sampler twice as slow per spp is compared at half the spp."""
+    import importlib.util
+    import pathlib
+    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "bench_samplers.py"
+    spec = importlib.util.spec_from_file_location("bench_samplers", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    rows = []
+    for sampler, c, k, t in (("independent", 1.0, 1.0, 1e-3), ("sobol", 1.0, 2.0, 2e-3)):
+        for spp in (1, 4, 16, 64, 256, 1024):
+            rows.append({"scene": "s", "sampler": sampler, "spp": spp, "relmse": c * spp ** -k,
+                         "relmse_raw": c * spp ** -k, "floor": 0.0, "s_per_spp": t, "cpu_s_per_spp": t})
+    out = bench.analyse(rows)["s"]
+    assert out["independent"]["slope"] == pytest.approx(-1.0) and out["sobol"]["slope"] == pytest.approx(-2.0)
+    assert out["sobol"]["spp_at_equal_time"] == pytest.approx(128.0)
+    assert out["sobol"]["relmse_equal_time"] == pytest.approx(128.0 ** -2, rel=1e-6)
+    assert out["sobol"]["gain_256spp"] == pytest.approx(256.0, rel=1e-6)
+    # points under 4x the reference's floor are left out of the fit
+    for r in rows:
+        if r["sampler"] == "sobol" and r["spp"] >= 256:
+            r["floor"], r["relmse"] = r["relmse_raw"], 1e-12
+    assert bench.analyse(rows)["s"]["sobol"]["slope"] == pytest.approx(-2.0)
