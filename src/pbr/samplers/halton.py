@@ -2,23 +2,15 @@
 
 from __future__ import annotations
 
-import functools
-
 import drjit as dr
 import mitsuba as mi
 
 from .base import SAMPLERS, SampleStream, Sampler, cranley_patterson, hash_u32, parse_randomization, stream_class
-from .lowdiscrepancy import primes, radical_inverse
+from .lowdiscrepancy import PRIMES, radical_inverse, tables
 
 # Pixel coordinates are taken modulo this (pbrt-v4's MaxHaltonResolution): the sequence
 # repeats its pixel pattern every 128 x 128 pixels.
 MAX_RESOLUTION = 128
-PRIMES = 1000
-
-
-@functools.lru_cache(maxsize=None)
-def _prime_table(variant: str) -> mi.UInt32:
-    return mi.UInt32(primes(PRIMES))
 
 
 def _inverse_radical(v: mi.UInt32, base: int, digits: int) -> mi.UInt32:
@@ -48,7 +40,7 @@ class HaltonStream(SampleStream):
     def next_1d(self):
         d = dr.select(self.dim >= PRIMES, 2, self.dim)
         self.dim = d + 1
-        return self._sample(self.index, dr.gather(mi.UInt32, _prime_table(mi.variant()), d), d)
+        return self._sample(self.index, dr.gather(mi.UInt32, tables()["primes"], d), d)
 
     def _sample(self, index, base, d):
         r = self.randomization

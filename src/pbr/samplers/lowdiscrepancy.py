@@ -11,6 +11,7 @@ is a 32-bit fixed-point fraction, the first digit in the top bit, so a sample of
 from __future__ import annotations
 
 import functools
+import itertools
 import os
 
 import drjit as dr
@@ -20,6 +21,7 @@ import numpy as np
 from ..sampling import mix32
 
 SOBOL_DIMENSIONS = 1024
+PRIMES = 1000              # Halton dimensions (pbrt-v4's PrimeTableSize)
 SOBOL_BITS = 32
 _DATA = os.path.join(os.path.dirname(os.path.dirname(__file__)), "data", "sobol_joe_kuo_1024.txt")
 
@@ -53,15 +55,24 @@ def sobol_matrices() -> np.ndarray:
     return out.astype(np.uint32)
 
 
-def sobol_table() -> mi.UInt32:
-    """The generator matrices as a flat ``mi.UInt32`` (dimension-major) of the current
-    variant (cached per variant: Dr.Jit arrays belong to a backend)."""
-    return _sobol_table(mi.variant())
+def tables() -> dict:
+    """The samplers' Dr.Jit tables of the current variant (cached per variant: Dr.Jit
+    arrays belong to a backend): ``sobol`` (the generator matrices, flat, dimension-major),
+    ``primes`` (Halton's bases), ``perm4`` (the 24 permutations of 4 digits, packed 2 bits
+    each, for zsobol). ``pbr.freeze`` hands them to ``dr.freeze`` as state: arrays made
+    before a recording must be its inputs."""
+    return _tables(mi.variant())
 
 
 @functools.lru_cache(maxsize=None)
-def _sobol_table(variant: str) -> mi.UInt32:
-    return mi.UInt32(sobol_matrices().ravel())
+def _tables(variant: str) -> dict:
+    perm4 = [sum(d << (2 * k) for k, d in enumerate(p)) for p in itertools.permutations(range(4))]
+    return {"sobol": mi.UInt32(sobol_matrices().ravel()), "primes": mi.UInt32(primes(PRIMES)),
+            "perm4": mi.UInt32(perm4)}
+
+
+def sobol_table() -> mi.UInt32:
+    return tables()["sobol"]
 
 
 def sobol_bits(index: mi.UInt32, dim, nbits: int) -> mi.UInt32:

@@ -9,7 +9,6 @@ over power-of-two prefixes."""
 from __future__ import annotations
 
 import functools
-import itertools
 
 import drjit as dr
 import mitsuba as mi
@@ -17,7 +16,7 @@ import numpy as np
 
 from .base import (SAMPLERS, SampleStream, Sampler, cranley_patterson, hash_u32, log2_int, parse_randomization,
                    stream_class, u32_to_unit)
-from .lowdiscrepancy import SOBOL_BITS, SOBOL_DIMENSIONS, scramble_bits, sobol_bits, sobol_matrices
+from .lowdiscrepancy import SOBOL_BITS, SOBOL_DIMENSIONS, scramble_bits, sobol_bits, sobol_matrices, tables
 from ..sampling import mix32
 
 
@@ -216,12 +215,6 @@ def morton2(x: mi.UInt32, y: mi.UInt32) -> mi.UInt32:
     return spread(x) | (spread(y) << 1)
 
 
-@functools.lru_cache(maxsize=None)
-def _perm4_table(variant: str) -> mi.UInt32:
-    """The 24 permutations of (0, 1, 2, 3), each packed as 4 two-bit digits (per variant)."""
-    return mi.UInt32([sum(d << (2 * k) for k, d in enumerate(p)) for p in itertools.permutations(range(4))])
-
-
 class ZSobolStream(SampleStream):
     """A sample of one Sobol' (0,2)-sequence laid over the film in Morton (Z) order, its
     base-4 index digits permuted per dimension (Ahmed and Wonka 2020, pbrt-v4's
@@ -232,7 +225,7 @@ class ZSobolStream(SampleStream):
     def _index(self):
         """The sequence index of this sample for the current dimension."""
         odd = self.log2_spp & 1
-        table = _perm4_table(mi.variant())
+        table = tables()["perm4"]
         out = mi.UInt32(0)
         salt = self.dim * 0x55555555
         for i in range(self.n4 - 1, odd - 1, -1):
