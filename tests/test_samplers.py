@@ -497,3 +497,17 @@ def test_frozen_renders_replay_with_other_seeds(name):
         counts.append(frozen.n_recordings)
     # dr.freeze records twice at first (as with every pbr render), then only replays
     assert counts[-1] == counts[1] <= 2, counts
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", ["stratified", "multijitter", "orthogonal", "ldsampler"])
+def test_mitsubas_samplers_render_what_mitsuba_renders(name):
+    """The same scene dict, with one of Mitsuba's samplers, in pbr and in Mitsuba 3
+    (llvm_ad_spectral): pbr.validate's test over 16 batches of 64 spp each."""
+    d = pbr.cornell_box(16, 64)
+    d["integrator"] = {"type": "path", "max_depth": 6, "hide_emitters": True}
+    d["sensor"]["sampler"] = {"type": name, "sample_count": 64}
+    scene = pbr.load_dict(d)
+    res = validate.compare_renders(lambda seed, spp: np.asarray(pbr.render(scene, seed=seed, spp=spp)),
+                                   validate.mitsuba_render_fn(d), spp=1024, batches=16, seed_a=11, seed_b=12)
+    assert res.passed, res
