@@ -82,6 +82,11 @@ class SampleStream(Struct):
         """The next 1D dimension (``mi.PCG32``'s method name, which integrators call)."""
         return self.next_1d()
 
+    def next_uint32(self) -> mi.UInt32:
+        """A 32-bit key from the next dimension (``mi.PCG32``'s method: integrators that
+        seed streams of their own from it, e.g. ``whitted``'s branches)."""
+        return mix32(dr.reinterpret_array(mi.UInt32, self.next_1d()))
+
     def next_2d(self) -> mi.Point2f:
         """The next two dimensions as a 2D point (a stratified pair where the sampler has one)."""
         u = self.next_1d()

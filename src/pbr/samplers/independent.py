@@ -22,6 +22,9 @@ class IndependentStream(SampleStream):
     def next_1d(self) -> mi.Float:
         return self.rng.next_float32()
 
+    def next_uint32(self) -> mi.UInt32:
+        return self.rng.next_uint32()
+
 
 @SAMPLERS.register("independent")
 class IndependentSampler(Sampler):
