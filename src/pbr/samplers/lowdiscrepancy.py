@@ -161,7 +161,8 @@ def radical_inverse(index: mi.UInt32, base: mi.UInt32, perm_seed=None, owen_seed
     k = mi.UInt32(0)
 
     def cond(idx, value, scale, prefix, k):
-        return (idx > 0) | (scrambled & (scale > 1e-9))
+        # scrambled digits go on to float32's resolution (2^-24; the result is a float)
+        return (idx > 0) | (scrambled & (scale > 6e-8))
 
     def body(idx, value, scale, prefix, k):
         q = idx // base
@@ -182,8 +183,9 @@ def radical_inverse(index: mi.UInt32, base: mi.UInt32, perm_seed=None, owen_seed
 
 def _permute_digit(digit: mi.UInt32, base: mi.UInt32, seed: mi.UInt32) -> mi.UInt32:
     """A pseudo-random permutation of 0..base-1 (per-lane base), chosen by ``seed``:
-    digit -> (digit * a + c) mod base with a hash-chosen multiplier a in 1..base-1 (a
-    bijection for a prime base) and offset c."""
-    a = mix32(seed) % (base - 1) + 1
-    c = mix32(seed ^ 0x68E31DA4) % base
+    digit -> (digit * a + c) mod base with a multiplier a in 1..base-1 (a bijection for a
+    prime base) and an offset c from the two halves of one hash (bases < 2^16)."""
+    h = mix32(seed)
+    a = (h & 0xFFFF) % (base - 1) + 1
+    c = (h >> 16) % base
     return (digit * a + c) % base
