@@ -23,7 +23,7 @@ import gc
 
 import drjit as dr
 
-from . import spectrum
+from . import samplers, spectrum
 from .scene.params import SceneParameters
 from .scene.scene import Scene
 from .plugins.tables import map_tables
@@ -66,7 +66,7 @@ def _state(args, kwargs) -> list:
 
     find(args)
     find(kwargs)
-    return [scene_state(s) for s in scenes] + [spectrum.tables()]
+    return [scene_state(s) for s in scenes] + [spectrum.tables(), samplers.tables()]
 
 
 def freeze(fn=None, **kwargs):

@@ -33,3 +33,13 @@ def power_heuristic(pdf_a, pdf_b):
     a2, b2 = pdf_a * pdf_a, pdf_b * pdf_b
     w = a2 / (a2 + b2)
     return dr.select(dr.isfinite(w), w, dr.select(dr.isinf(pdf_a), 1.0, 0.0))
+
+
+def mix32(x):
+    """A 32-bit integer hash (xor-shift-multiply avalanche), per lane: seeds of
+    per-lane random streams and scrambles (layered BSDFs, samplers)."""
+    x = x ^ (x >> 16)
+    x = x * 0x21F0AAAD
+    x = x ^ (x >> 15)
+    x = x * 0x735A2D97
+    return x ^ (x >> 15)

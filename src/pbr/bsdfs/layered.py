@@ -16,7 +16,7 @@ from .. import dispatch
 from ..phase import hg, hg_pdf, hg_sample
 from ..plugins.params import ParamOwner, param_table
 from ..plugins.props import HG_ASYMMETRY, IOR, NONNEGATIVE, ROUGHNESS
-from ..sampling import cosine_hemisphere_pdf, power_heuristic, square_to_cosine_hemisphere
+from ..sampling import cosine_hemisphere_pdf, mix32, power_heuristic, square_to_cosine_hemisphere
 from ..spectrum import clamp_keep_grad, read_spd
 from ..textures import add_tabulated, load_spectrum
 from .base import BSDF_TYPES, BSDFSample, BSDFType, DIFFUSE, GLOSSY, REFLECTION, SPECULAR, TRANSMISSION
@@ -34,20 +34,11 @@ SMOOTH, ROUGH, MIXED = "smooth", "rough", "mixed"
 
 # ----------------------------------------------------------------------- helpers
 
-def _mix32(x):
-    """A 32-bit integer finaliser (xor-shift-multiply avalanche)."""
-    x = x ^ (x >> 16)
-    x = x * 0x21F0AAAD
-    x = x ^ (x >> 15)
-    x = x * 0x735A2D97
-    return x ^ (x >> 15)
-
-
 def _hash(*values, salt=0x9E3779B9):
     """Hash of the float bits of ``values`` (per lane)."""
     h = mi.UInt32(salt)
     for v in values:
-        h = _mix32(h ^ dr.reinterpret_array(mi.UInt32, mi.Float(v)) ^ 0x85EBCA6B)
+        h = mix32(h ^ dr.reinterpret_array(mi.UInt32, mi.Float(v)) ^ 0x85EBCA6B)
     return h
 
 

@@ -76,7 +76,7 @@ class AOIntegrator(SamplingIntegrator):
                 skip &= bsdfs.is_null(dr.gather(mi.UInt32, scene.shape_bsdf, shape, skip), skip)
         hit = active & si.is_valid()
 
-        u = mi.Point2f(rng.next_float32(), rng.next_float32())
+        u = rng.next_2d()
         w_local, pdf = self._direction(u)
         n = dr.select(dr.dot(si.n, ray.d) > 0, -si.n, si.n)
         wi = mi.Frame3f(n).to_world(w_local)

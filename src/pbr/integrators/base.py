@@ -28,7 +28,7 @@ import numpy as np
 
 from .. import backend, memory
 from .. import spectrum as spec
-from ..samplers import IndependentSampler, seed_array
+from ..samplers import seed_array
 from ..sampling import power_heuristic
 from ..lights import LIGHT_TYPES
 from ..plugins.props import SceneError
@@ -222,7 +222,7 @@ class SamplingIntegrator:
     def _plan(self, scene, sensor, spp):
         cam = scene.sensors[sensor]
         w, h = cam.film.size
-        spp = int(spp) if spp else cam.sampler.sample_count
+        spp = cam.sampler.round_spp(int(spp), warn=True) if spp else cam.sampler.sample_count
         if self.job is not None and self.job.spp_per_pass:
             per_pass = self.job.spp_per_pass
             if spp % per_pass:
@@ -240,23 +240,27 @@ class SamplingIntegrator:
             textures.footprint = (cam, spp)
         return cam, w, h, spp, per_pass, spp // per_pass
 
-    def _camera_samples(self, cam, w, h, spp, per_pass, pass_index, seed):
-        """Rays, wavelengths, filter weights and RNGs of one pass."""
-        n = w * h * per_pass
-        idx = dr.arange(mi.UInt32, n)
-        pixel = idx // per_pass
-        sub = idx - pixel * per_pass
-        p_index = dr.opaque(mi.UInt32, pass_index)
-        sample_index = pixel * spp + p_index * per_pass + sub
-        rng = IndependentSampler.make_rng(sample_index, seed_array(seed))
-        wl = SampledWavelengths.sample_visible(rng.next_float32())
-        off, weight = cam.film.rfilter.sample(mi.Point2f(rng.next_float32(), rng.next_float32()))
+    def _camera_samples(self, cam, w, h, spp, per_pass, pass_index, seed, sampler=None, pixel=None, index=None):
+        """Rays, wavelengths, filter weights and sample streams of one pass: the camera's
+        sampler (or ``sampler``) starts a stream per (pixel, sample index), which gives the
+        wavelength (1D), the filter's position in the pixel (2D) and the lens (2D), in
+        pbrt-v4's order; the integrator draws the rest from it. A pass is every pixel's
+        samples ``pass_index * per_pass`` onward, pixel-major, unless ``pixel`` and
+        ``index`` (per-lane ``mi.UInt32``, index < spp) name the samples (adaptive passes)."""
+        if pixel is None:
+            idx = dr.arange(mi.UInt32, w * h * per_pass)
+            pixel = idx // per_pass
+            index = dr.opaque(mi.UInt32, pass_index) * per_pass + (idx - pixel * per_pass)
+        sampler = sampler or cam.sampler
+        rng = sampler.start(pixel, index, spp, (w, h), seed_array(seed))
+        wl = SampledWavelengths.sample_visible(rng.next_1d())
+        off, weight = cam.film.rfilter.sample(rng.pixel_2d())
         px = mi.Float(pixel % w) + 0.5 + off.x
         py = mi.Float(pixel // w) + 0.5 + off.y
         inside = (px >= 0) & (px < w) & (py >= 0) & (py < h)
         weight = dr.select(inside, weight, 0.0)
-        aperture = mi.Point2f(rng.next_float32(), rng.next_float32()) if cam.needs_aperture_sample else None
-        time = cam.sample_time(rng.next_float32()) if getattr(cam, "motion", None) is not None else None
+        aperture = rng.next_2d() if cam.needs_aperture_sample else None
+        time = cam.sample_time(rng.next_1d()) if getattr(cam, "motion", None) is not None else None
         if getattr(cam, "weights_rays", False):
             # A camera whose rays carry a weight (the realistic camera's lens throughput):
             # it scales the sample's radiance, not the filter weight the film divides by.
@@ -337,12 +341,12 @@ class SamplingIntegrator:
             with dr.suspend_grad():
                 rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
                 pixel = dr.arange(mi.UInt32, w * h * per_pass) // per_pass
-                state = _snapshot(rng)
+                state = rng.copy()
                 L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
                 dL = self._develop_adjoint(wl, weight, pixel_w, g, pixel, inside)
                 dL, = self.counter().replace([dL], inside)
                 # L and dL stay lazy: the primal and adjoint loops fuse into one kernel
-                rng.state, rng.inc = _snapshot(state)
+                rng.assign(state)
                 self.sample(scene, rng, ray, wl, BACKWARD, dL, L, inside)
             dr.eval()
 
@@ -351,10 +355,10 @@ class SamplingIntegrator:
         self._require_differentiable()
         self.prepare(scene, sensor)
         def radiance_derivative(rng, ray, wl, inside):
-            state = _snapshot(rng)
+            state = rng.copy()
             L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
             dr.eval(L)
-            rng.state, rng.inc = _snapshot(state)
+            rng.assign(state)
             return self.sample(scene, rng, ray, wl, FORWARD, None, L, inside)[0]
         return self._film(scene, sensor, seed, spp, radiance_derivative, progress=False)
 
@@ -482,13 +486,6 @@ def _develop(sums, w, h, film=None):
     for k, v in enumerate(out):
         dr.scatter(img, v, pixel * len(out) + k)
     return mi.TensorXf(img, (h, w, len(out)))
-
-
-def _snapshot(rng):
-    """Copies of a PCG32's (state, inc): symbolic loops update the arrays in place, so
-    replaying a path needs real copies, not references."""
-    st, inc = (rng.state, rng.inc) if hasattr(rng, "state") else rng
-    return type(st)(st), type(inc)(inc)
 
 
 def _progress(n_pass, progress, desc="pbr render", unit="pass"):

@@ -305,7 +305,7 @@ class BDPTIntegrator(LightTracingIntegrator):
 
             # Continue: sample the adjoint BSDF, then y_{k-1}'s reverse density is known.
             u1 = rng.next_float32()
-            u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u2 = rng.next_2d()
             go = hit & (k + 1 < strategies.light_max)
             bs = sample_importance(bsdfs, bsdf_id, ctx, u1, u2, go)
             wo = si.to_world(bs.wo)
@@ -396,9 +396,9 @@ class BDPTIntegrator(LightTracingIntegrator):
 
             # s = 1: next-event estimation (depth k).
             u_light = rng.next_float32()
-            u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u_pos = rng.next_2d()
             u1 = rng.next_float32()
-            u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u2 = rng.next_2d()
             go = hit & (k + 1 < strategies.camera_max)
             nee = conn & (k <= md) & strategies.wants(1, k + 1)
             wo_l = mi.Vector3f(0, 0, 1)

@@ -117,7 +117,7 @@ class DirectIntegrator(SamplingIntegrator):
         i = mi.UInt32(0)
         while dr.hint(smooth & (i < n_em), label="direct_emitter"):
             u_light = rng.next_float32()
-            u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u_pos = rng.next_2d()
             ls = lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl, smooth)
             em = smooth & (ls.pdf > 0)
             em &= geo.unoccluded(si, ls.p, em)
@@ -130,7 +130,7 @@ class DirectIntegrator(SamplingIntegrator):
         j = mi.UInt32(0)
         while dr.hint(hit & (j < n_bs), label="direct_bsdf"):
             u1 = rng.next_float32()
-            u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u2 = rng.next_2d()
             bs = bsdfs.sample(bsdf_id, ctx, u1, u2, hit)
             go = hit & (bs.pdf > 0) & dr.any(bs.weight != 0)
             ray_b = si.spawn_ray(si.to_world(bs.wo))

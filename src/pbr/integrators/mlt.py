@@ -77,6 +77,13 @@ class PrimarySampleStream(Struct):
         self.index += self.lanes
         return u
 
+    next_1d = next_float32
+
+    def next_2d(self) -> mi.Point2f:
+        """The next two coordinates (the sample streams' interface, which bdpt draws from)."""
+        u = self.next_float32()
+        return mi.Point2f(u, self.next_float32())
+
 
 def uniform_samples(index: mi.UInt32, seed: mi.UInt32, dims: int) -> mi.Float:
     """Fresh primary samples (dimension-major, ``dims`` per lane) for sample numbers

@@ -108,7 +108,7 @@ class PathIntegrator(SamplingIntegrator):
 
             # Next-event estimation: one light sample, MIS-weighted against the BSDF.
             u_light = rng.next_float32()
-            u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u_pos = rng.next_2d()
             smooth = active_next & bsdfs.smooth(bsdf_id, active_next) & self.next_event
             with dr.resume_grad(when=not primal):
                 # Attached: the sampled radiance ls.L depends on emitter parameters.
@@ -120,7 +120,7 @@ class PathIntegrator(SamplingIntegrator):
             # The BSDF is evaluated toward the light and sampled (to continue the path)
             # in one call, so texture lookups are shared.
             u1 = rng.next_float32()
-            u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u2 = rng.next_2d()
             with dr.resume_grad(when=not primal):
                 f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, active_next)
                 # The MIS weight is detached (as Mitsuba's): the BSDF-sampled half of

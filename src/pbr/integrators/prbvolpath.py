@@ -259,9 +259,9 @@ class PRBVolPathIntegrator(_MediumAware):
             nee = (rs & bsdfs.smooth(bsdf_id, rs)) | sc
             ref = volume.nee_reference(si, sc, p_sc)
             u_light = rng.next_float32()
-            u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u_pos = rng.next_2d()
             u1 = rng.next_float32()
-            u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u2 = rng.next_2d()
             with dr.resume_grad(when=not primal):
                 ls = lights.sample_Li(self.light_sampler, ref, u_light, u_pos, wl, nee)
                 wo_em = si.to_local(ls.wi)
@@ -275,7 +275,7 @@ class PRBVolPathIntegrator(_MediumAware):
             bs = dr.detach(bs)
             sray, s_med = volume.shadow_ray(scene, shape, si, ls, sc, p_sc, medium, nee & rs)
             nee &= ls.pdf > 0
-            state = (type(rng.state)(rng.state), type(rng.inc)(rng.inc))
+            state = rng.copy()
             T_sh, _ = self._transmittance(scene, rng, sray, ls.p, s_med, wl, PRIMAL, dL, dL, dL_fwd, nee)
             if primal:
                 L = L + dr.detach(Ld_unocc) * T_sh
@@ -283,8 +283,7 @@ class PRBVolPathIntegrator(_MediumAware):
                 Ld = dr.detach(Ld_unocc) * T_sh
                 L = L - Ld
                 # Replay the shadow ray's random numbers for the transmittance derivative.
-                rng2 = type(rng)()
-                rng2.state, rng2.inc = type(state[0])(state[0]), type(state[1])(state[1])
+                rng2 = state.copy()
                 _, dL_fwd = self._transmittance(scene, rng2, sray, ls.p, s_med, wl, mode, dL, Ld, dL_fwd, nee)
 
             # -- continue: BSDF or phase function sampling ----------------------------------------

@@ -75,7 +75,7 @@ class RandomWalkIntegrator(SamplingIntegrator):
             go = hit & ~skip & (depth + 1 < self.max_depth)
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, go)
             null = bsdfs.is_null(bsdf_id, go)
-            wp = mi.warp.square_to_uniform_sphere(mi.Point2f(rng.next_float32(), rng.next_float32()))
+            wp = mi.warp.square_to_uniform_sphere(rng.next_2d())
             ctx = ShadingContext(si, wl)
             f = bsdfs.eval_pdf(bsdf_id, ctx, si.to_local(wp), go & ~null)[0]
             beta[go & ~null] = beta * f * (4.0 * math.pi)

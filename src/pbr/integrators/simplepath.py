@@ -88,7 +88,7 @@ class SimplePathIntegrator(SamplingIntegrator):
         of the path's next segment, by BSDF sampling or uniformly."""
         bsdfs = scene.bsdfs
         u1 = rng.next_float32()
-        u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+        u2 = rng.next_2d()
         if not self.sample_bsdf:
             kind = dr.gather(mi.UInt32, uniform_kind, bsdf_id, active)
             wi, pdf = self._uniform_direction(si, wo, kind, u2)
@@ -133,7 +133,7 @@ class SimplePathIntegrator(SamplingIntegrator):
 
             if self.sample_lights:
                 u_light = rng.next_float32()
-                u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
+                u_pos = rng.next_2d()
                 lit = scatter & bsdfs.smooth(bsdf_id, scatter)
                 ls = lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl, lit)
                 em = lit & (ls.pdf > 0)

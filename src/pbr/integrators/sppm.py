@@ -22,6 +22,8 @@ from .base import INTEGRATORS, SamplingIntegrator, _progress, emitted_mis, mis_s
 from .lightpath import sample_importance, shading_correction, start_light_path
 
 UNLIMITED = 0xFFFFFFF0
+# The camera pass samples independently (see _visible_points).
+_INDEPENDENT = IndependentSampler()
 
 
 class VisiblePoints:
@@ -241,7 +243,9 @@ class SPPMIntegrator(SamplingIntegrator):
         """(visible points, per-pixel w Ld (XYZ), filter weights w) of iteration ``it``
         (one camera sample per pixel; the iteration only changes the opaque seed, so one
         kernel serves every iteration count)."""
-        rng, _, ray, weight, inside = self._camera_samples(cam, w, h, 1, 1, 0, mix32(seed, it))
+        # One independent sample per pixel and iteration (whatever the camera's sampler: the
+        # iterations' points must not repeat, and a 1-sample pattern stratifies nothing).
+        rng, _, ray, weight, inside = self._camera_samples(cam, w, h, 1, 1, 0, mix32(seed, it), sampler=_INDEPENDENT)
         L, vp_ray, beta, depth, found, term = self._camera_path(scene, rng, ray, wl, inside)
         si, shape = scene.geometry.intersect(vp_ray, found)
         found &= si.is_valid()

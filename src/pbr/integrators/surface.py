@@ -43,7 +43,7 @@ def surface_channels(scene, rng, ray, wl, kinds, active, frame=None) -> list:
             v = [mi.Float(shape + 1)]
         else:   # albedo
             u1 = rng.next_float32()
-            u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u2 = rng.next_2d()
             bs = bsdfs.sample(bsdf_id, ctx, u1, u2, hit)
             rho = dr.select(bs.pdf > 0, bs.weight, 0.0)
             v = list(spec.xyz_to_srgb(spec.to_xyz(rho, wl)))

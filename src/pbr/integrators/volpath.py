@@ -262,12 +262,12 @@ class VolPathIntegrator(_MediumAware):
             nee = smooth | sc
             ref = volume.nee_reference(si, sc, p_sc)
             u_light = rng.next_float32()
-            u_pos = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u_pos = rng.next_2d()
             ls = lights.sample_Li(self.light_sampler, ref, u_light, u_pos, wl, nee)
             nee &= ls.pdf > 0
             wo_em = si.to_local(ls.wi)
             u1 = rng.next_float32()
-            u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+            u2 = rng.next_2d()
             f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs_sample)
             if has_media:
                 f_em, pdf_em = volume.phase_nee(media, medium, ray, ls.wi, sc, f_em, pdf_em)
@@ -388,7 +388,7 @@ class SimpleVolPathIntegrator(_MediumAware):
                 scene, shape, surf, scattered, mi.Bool(False), depth, max_depth)
             valid |= at_vertex
             ctx = ShadingContext(si, wl)
-            bs = bsdfs.sample(bsdf_id, ctx, rng.next_float32(), mi.Point2f(rng.next_float32(), rng.next_float32()), rs)
+            bs = bsdfs.sample(bsdf_id, ctx, rng.next_float32(), rng.next_2d(), rs)
             wi, pdf, weight, delta = volume.sample_direction(media, medium, ray, si, bs, sc, rng)
             cont = go_on & (pdf > 0)
             beta[cont] = beta * weight[0]

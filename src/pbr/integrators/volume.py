@@ -213,7 +213,7 @@ def sample_direction(media, medium, ray, si, bs, sc, rng):
     weight = mi.Spectrum(bs.weight)
     delta = mi.Bool(bs.delta)
     if len(media) > 0:
-        wph, pph = media.phase_sample(medium - 1, -ray.d, mi.Point2f(rng.next_float32(), rng.next_float32()), sc)
+        wph, pph = media.phase_sample(medium - 1, -ray.d, rng.next_2d(), sc)
         wi = dr.select(sc, wph, wi)
         pdf = dr.select(sc, pph, pdf)
         weight = dr.select(sc, mi.Spectrum(1.0), weight)

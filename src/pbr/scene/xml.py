@@ -655,7 +655,7 @@ def _xml_tags():
     dict is written with the right tags; ``mix`` (a BSDF and a texture) is a BSDF."""
     return (("bsdf", bsdf_names()), ("emitter", LIGHT_TYPES),
             ("sensor", {"thinlens", "orthographic"} | set(SENSORS)), ("film", FILMS),
-            ("sampler", {"independent", "stratified", "multijitter"}), ("rfilter", FILTERS),
+            ("sampler", {"orthogonal"} | set(SAMPLERS)), ("rfilter", FILTERS),
             ("integrator", INTEGRATORS), ("spectrum", ("blackbody", "d65", "uniform")),
             ("texture", ("bitmap", "checkerboard", "scale", "mix", "mesh_attribute")),
             ("medium", MEDIUM_TYPES), ("phase", PHASE_TYPES))

@@ -11,36 +11,38 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from .plugins.props import Props
-from .plugins.registry import Registry
-
-SAMPLERS = Registry("sampler")
+from .base import SAMPLERS, SampleStream, Sampler
 
 
-def seed_array(seed) -> mi.UInt32:
-    """``seed`` (a Python int or a width-1 ``mi.UInt32``) as an opaque ``mi.UInt32``."""
-    if isinstance(seed, int):
-        return dr.opaque(mi.UInt32, seed & 0xFFFFFFFF)
-    if not (isinstance(seed, mi.UInt32) and dr.width(seed) == 1):
-        raise TypeError(f"seed: expected a Python int or a mi.UInt32 of width 1, got {type(seed).__name__}")
-    return seed
+class IndependentStream(SampleStream):
+    """A PCG32 stream: every dimension is a fresh uniform number."""
+
+    _fields = {"rng": "PCG32"}
+
+    def next_1d(self) -> mi.Float:
+        return self.rng.next_float32()
+
+    def next_uint32(self) -> mi.UInt32:
+        return self.rng.next_uint32()
 
 
 @SAMPLERS.register("independent")
-class IndependentSampler:
-    """``independent``: uniform random numbers from one PCG32 stream per camera sample.
+class IndependentSampler(Sampler):
+    """``independent``: uniform random numbers from one PCG32 stream per camera sample
+    (Mitsuba's and pbrt-v4's ``independent``).
 
     ============  ====  =======  ==================================================
     name          type  default  meaning
     ============  ====  =======  ==================================================
-    sample_count  int   4        samples per pixel
-    seed          int   0        accepted (renders take their seed from pbr.render)
+    sample_count  int   4        samples per pixel (pbrt-v4's ``pixelsamples`` too)
+    seed          int   0        offset added to the seed a render is given
     ============  ====  =======  ==================================================
     """
 
-    def __init__(self, props: Props | None = None):
-        self.sample_count = props.int("sample_count", 4, min=1) if props else 4
-        self.seed = props.int("seed", 0) if props else 0
+    name = "independent"
+
+    def __init__(self, props=None):
+        super().__init__(props)
         if props:
             props.finish()
 
@@ -53,3 +55,5 @@ class IndependentSampler:
         rng.seed(mi.UInt64(v0), mi.UInt64(v1))
         return rng
 
+    def start(self, pixel, index, spp, size, seed):
+        return IndependentStream(rng=self.make_rng(pixel * spp + index, self.render_seed(seed)))
