@@ -147,6 +147,8 @@ class SamplingIntegrator:
     pass_separable = True
     # The PassJob of the current render (pass_job), None for a whole render.
     job = None
+    # The adaptive plan of the current render (pbr.adaptive), None for uniform spp.
+    adaptive = None
 
     def __init__(self, props):
         self.path = props.path
@@ -221,12 +223,14 @@ class SamplingIntegrator:
         memory.check_render(w, h, per_pass, 4, f"sensor {sensor}")
         return cam, w, h, spp, per_pass, spp // per_pass
 
-    def _camera_samples(self, cam, w, h, spp, per_pass, pass_index, seed):
-        """Rays, wavelengths, filter weights and RNGs of one pass."""
-        n = w * h * per_pass
+    def _camera_samples(self, cam, w, h, spp, per_pass, pass_index, seed, pixels=None):
+        """Rays, wavelengths, filter weights and RNGs of one pass (``pixels``: only these
+        pixels, ``per_pass`` samples each: an adaptive render's pass, see pbr.adaptive)."""
+        n = (w * h if pixels is None else dr.width(pixels)) * per_pass
         idx = dr.arange(mi.UInt32, n)
-        pixel = idx // per_pass
-        sub = idx - pixel * per_pass
+        slot = idx // per_pass
+        sub = idx - slot * per_pass
+        pixel = slot if pixels is None else dr.gather(mi.UInt32, pixels, slot)
         p_index = dr.opaque(mi.UInt32, pass_index)
         sample_index = pixel * spp + p_index * per_pass + sub
         rng = IndependentSampler.make_rng(sample_index, seed_array(seed))
@@ -240,6 +244,19 @@ class SamplingIntegrator:
         ray = cam.sample_ray(mi.Point2f(px / w, py / h), aperture)
         return rng, wl, ray, weight, inside
 
+    def _pass_sums(self, cam, w, h, spp, per_pass, p, seed, radiance, pixels=None, moments=False):
+        """Per-pixel film sums of pass ``p`` (see _film; ``pixels``: of those pixels only,
+        in their order). ``moments`` appends w^2 Y^2, w^2 Y and w^2 (Y: the sample's
+        luminance), the sums a pixel's variance is estimated from (pbr.adaptive)."""
+        rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed, pixels)
+        out = radiance(rng, ray, wl, inside)
+        L, extra = out if isinstance(out, tuple) else (out, ())
+        xyz, *extra = self.counter().replace([spec.to_xyz(L, wl) * weight, *extra], inside)
+        extra = [c * weight for c in extra]
+        stats = [xyz.y * xyz.y, xyz.y * weight, weight * weight] if moments else []
+        n = w * h if pixels is None else dr.width(pixels)
+        return _pixel_sums([*xyz, weight, *extra, *stats], n, per_pass)
+
     # -- rendering ------------------------------------------------------------------------
     def _film(self, scene, sensor, seed, spp, radiance, progress=None):
         """Develop an image from per-sample spectra ``radiance(rng, ray, wl, inside)``
@@ -249,6 +266,8 @@ class SamplingIntegrator:
         ``radiance`` may also return ``(spectrum, channels)``, ``channels`` a list of
         per-sample ``mi.Float`` (AOVs): they are developed with the same filter weights
         and appended after R, G, B, giving an (H, W, 3 + len(channels)) tensor."""
+        if self.adaptive is not None:       # per-pixel sample counts (pbr.adaptive)
+            return self.adaptive.film(self, scene, sensor, seed, spp, radiance, progress)
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
         sums, job = None, self.job
         bar = _progress(n_pass, progress)
@@ -259,12 +278,7 @@ class SamplingIntegrator:
                 if job is not None and p in job.given:
                     s = mi.Float(job.given[p])
                 else:
-                    rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
-                    out = radiance(rng, ray, wl, inside)
-                    L, extra = out if isinstance(out, tuple) else (out, ())
-                    xyz, *extra = self.counter().replace([spec.to_xyz(L, wl) * weight, *extra], inside)
-                    extra = [c * weight for c in extra]
-                    s = _pixel_sums([*xyz, weight, *extra], w * h, per_pass)
+                    s = self._pass_sums(cam, w, h, spp, per_pass, p, seed, radiance)
                     if job is not None:
                         job.sums[p] = np.array(s, dtype=np.float32)
                 sums = s if sums is None else sums + s
