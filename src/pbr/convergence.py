@@ -188,7 +188,7 @@ def _label(d):
 
 
 def convergence(scene, integrators=None, samplers=None, reference=None, budget=10.0, spp=None, max_spp=4096,
-                reference_spp=None, reference_integrator=None, seed=0, eps=RELMSE_EPS, progress=False):
+                reference_spp=None, reference_integrator=None, seed=0, reps=1, eps=RELMSE_EPS, progress=False):
     """relMSE vs time and spp of each (integrator, sampler) on ``scene`` (a scene dict:
     ``pbr.cornell_box()``, ``pbr.scenes.*``, or a dict of your own).
 
@@ -200,7 +200,9 @@ def convergence(scene, integrators=None, samplers=None, reference=None, budget=1
     here with ``reference_integrator`` (default: the first integrator) at
     ``reference_spp`` (default 16x the largest spp reached) in 16 batches.
     ``spp``: the spp to render (default doubling from 4 to ``max_spp`` while a
-    configuration's renders together take less than ``budget`` seconds).
+    configuration's renders together take less than ``budget`` seconds). ``reps``:
+    independent images (other seeds) per spp, their relMSE and time averaged (a single
+    image's relMSE jumps between spp on small images and heavy-tailed scenes).
     Returns a :class:`ConvergenceTable`."""
     from .scene import load_dict
     if not isinstance(scene, dict):
@@ -211,6 +213,8 @@ def convergence(scene, integrators=None, samplers=None, reference=None, budget=1
         raise ValueError("convergence: scene['sensor'] must be a sensor dict")
     integ = _configs("integrators", integrators, scene.get("integrator", {"type": "path"}))
     samp = _configs("samplers", samplers, sensor.get("sampler", {"type": "independent"}))
+    if isinstance(reps, bool) or not isinstance(reps, int) or reps < 1:
+        raise ValueError(f"convergence: reps must be a positive integer, got {reps!r}")
     if not isinstance(budget, (int, float)) or budget <= 0:
         raise ValueError(f"convergence: budget must be a positive number of seconds, got {budget!r}")
     spps = list(spp) if spp is not None else [1 << k for k in range(2, int(math.log2(max_spp)) + 1)]
@@ -232,16 +236,19 @@ def convergence(scene, integrators=None, samplers=None, reference=None, budget=1
             total = 0.0
             for k, n in enumerate(spps):
                 sc = scene_with(i, s, n)
-                img, wall, cpu, _ = timed_render(sc, n, seed=seed + 1 + k)
+                out = [timed_render(sc, n, seed=seed + 1 + k + 7919 * j) for j in range(reps)]
+                wall, cpu = float(np.mean([o[1] for o in out])), float(np.mean([o[2] for o in out]))
                 runs.append({"label": label, "integrator": ilabel, "sampler": slabel, "spp": n, "time_s": wall,
-                             "cpu_s": cpu, "image": img})
-                total += wall
+                             "cpu_s": cpu, "images": [o[0] for o in out]})
+                total += wall * reps
                 if spp is None and total + 2 * wall > budget:
                     break
     # The reference.
     floor = 0.0
     if reference is None:
         n_ref = reference_spp or 16 * max(r["spp"] for r in runs)
+        if not isinstance(n_ref, int) or n_ref < 16:
+            raise ValueError(f"convergence: reference_spp must be an integer >= 16, got {n_ref!r}")
         n_ref = max(16, n_ref - n_ref % 16)
         ri = _named("reference_integrator", reference_integrator) if reference_integrator else next(iter(integ.values()))
         from .render import render
@@ -255,12 +262,13 @@ def convergence(scene, integrators=None, samplers=None, reference=None, budget=1
         ref = np.asarray(reference, np.float64)
     rows = []
     for r in runs:
-        img = r.pop("image")
-        if img.shape != ref.shape:
-            raise ValueError(f"convergence: the reference is {ref.shape}, the images {img.shape}")
-        raw = validate.relative_mse(img, ref, eps)
+        imgs = r.pop("images")
+        if imgs[0].shape != ref.shape:
+            raise ValueError(f"convergence: the reference is {ref.shape}, the images {imgs[0].shape}")
+        raw = float(np.mean([validate.relative_mse(img, ref, eps) for img in imgs]))
+        mean = float(np.mean([img.mean() for img in imgs]))
         rows.append({**r, "relmse": raw - floor, "relmse_raw": raw, "ref_floor": floor,
-                     "mean_ratio": float(img.mean() / ref.mean()) if ref.mean() else float("nan")})
+                     "mean_ratio": mean / ref.mean() if ref.mean() else float("nan")})
     table = ConvergenceTable(rows)
     table.reference = ref
     return table
