@@ -87,15 +87,16 @@ def radiosity(d, ref, light):
 
 
 def sppm(d, ref):
-    print("\nsppm (max_depth -1 vs path max_depth -1; 64 iterations):")
+    print("\nsppm (max_depth -1 vs path max_depth -1; 64 iterations; radius 0: automatic, 4 R / max(W, H)):")
     print(f"{'radius':>7s} {'photons':>8s} {'time s':>7s} {'mean':>7s} {'block med':>9s} {'relMSE':>8s}")
-    for radius in (0.0, 0.05, 0.02):
-        for photons in (-1, 4 * RES * RES):
-            s = pbr.load_dict({**d, "integrator": {"type": "sppm", "max_depth": -1, "radius": radius,
-                                                   "photonsperiteration": photons}})
-            img, t = timed(s, 64)
-            m, b, rel = errors(img, ref)
-            print(f"{radius:7.3f} {photons:8d} {t:7.2f} {m:7.4f} {b:9.4f} {rel:8.4f}", flush=True)
+    for radius, photons in ((0.0, -1), (0.0, 4 * RES * RES), (0.4, -1), (0.2, -1), (0.05, -1), (0.025, -1),
+                            (1.0, -1)):
+        s = pbr.load_dict({**d, "integrator": {"type": "sppm", "max_depth": -1, "radius": radius,
+                                               "photonsperiteration": photons}})
+        img, t = timed(s, 64)
+        m, b, rel = errors(img, ref)
+        r0 = s.integrator.initial_radius(s, RES, RES)
+        print(f"{radius:7.3f} {photons:8d} {t:7.2f} {m:7.4f} {b:9.4f} {rel:8.4f}  (r_0 {r0:.3f})", flush=True)
 
 
 def layered(d, ref_spp):
