@@ -93,7 +93,8 @@ import pbr
 import drjit as dr
 from pbr import validate
 from pbr.plotting import pyplot
-from pbr.convergence import slope, time_to_reach, timed_render  # noqa: F401  (the shared error-vs-time helpers)
+# The error-vs-time helpers shared with pbr.convergence.
+from pbr.convergence import RELMSE_EPS, reference_floor, slope, time_to_reach, timed_render  # noqa: F401
 from pbr.integrators import INTEGRATORS
 
 HERE = Path(__file__).resolve().parent
@@ -120,7 +121,6 @@ EXCLUDED = {"ambientocclusion": "computes ambient occlusion, not radiance",
             "prb": "path's estimator (its primal pass is path's kernel): same curve"}
 BENCHED = UNBIASED + tuple(BIASED)
 REF_BATCHES = 16
-RELMSE_EPS = 1e-2
 CACHE_VERSION = 1
 # Errors at which the time-to-target ratios are read (path reaches them at the defaults).
 DEFAULT_TARGETS = {"cornell": 0.002, "indirect": 0.02, "caustic": 0.01, "crack": 0.01}
@@ -188,7 +188,7 @@ def reference(name, d, res, max_depth, spp, cache_dir):
 
 def floor_of(ref, var):
     """The reference's own contribution to the expected relMSE of an independent image."""
-    return float(np.mean(var / (ref * ref + RELMSE_EPS)))
+    return reference_floor(ref, var, RELMSE_EPS)
 
 
 # -- analysis ----------------------------------------------------------------------------

@@ -82,6 +82,12 @@ def slope(budgets, errors, last=3):
     return float(np.polyfit(x, y, 1)[0])
 
 
+def reference_floor(ref, var, eps=RELMSE_EPS) -> float:
+    """The share of a reference's own noise (``var``: the variance of its mean) in the
+    expected relMSE of an independent image against it: mean(var / (ref^2 + eps))."""
+    return float(np.mean(np.asarray(var) / (np.asarray(ref) ** 2 + eps)))
+
+
 class ConvergenceTable:
     """Rows (dicts) of :func:`convergence`: ``label``, ``integrator``, ``sampler``,
     ``spp``, ``time_s`` (warm wall seconds), ``cpu_s``, ``relmse``, ``relmse_raw``,
@@ -257,7 +263,7 @@ def convergence(scene, integrators=None, samplers=None, reference=None, budget=1
                                       n_ref, batches=16, seed=seed + 7)
     if isinstance(reference, validate.Estimate):
         ref, var = reference.mean, reference.var
-        floor = float(np.mean(var / (ref * ref + eps)))
+        floor = reference_floor(ref, var, eps)
     else:
         ref = np.asarray(reference, np.float64)
     rows = []
