@@ -191,9 +191,13 @@ class Adaptive:
             if (self.time_budget is not None and acc is not None
                     and time.perf_counter() - t0 >= self.time_budget):
                 break
+            # k samples each (a power of two): what the least needy active pixel still
+            # lacks, or more, up to what they have had (no pixel gets over twice its count)
+            # and to what half of them lack (the others' surplus is bounded by k).
             have = int(done[active[0]])
-            left = int(np.median(need[active])) - have
-            k = _pow2_floor(max(1, min(budget // active.size, left, cap - have)))
+            left = need[active] - have
+            k = max(int(left.min()), min(have, int(np.median(left))))
+            k = _pow2_floor(max(1, min(k, budget // active.size, cap - have)))
             if offset:
                 k = min(k, offset & -offset)       # the pass index is offset / k
             pixels = None if active.size == npx else active
