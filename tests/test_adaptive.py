@@ -124,6 +124,13 @@ def test_errors():
         pbr.render(scene, time_budget=0)
     with pytest.raises(NotImplementedError, match="sppm"):
         pbr.render(scene, integrator={"type": "sppm"}, target_relative_error=0.1)
+    frozen = pbr.freeze(lambda scene: pbr.render(scene, spp=4, target_relative_error=0.1))
+    with pytest.raises(Exception) as e:          # Dr.Jit reports it as a RuntimeError caused by ours
+        frozen(scene)
+    chain = [e.value]
+    while chain[-1].__cause__ or chain[-1].__context__:
+        chain.append(chain[-1].__cause__ or chain[-1].__context__)
+    assert any(isinstance(x, NotImplementedError) and "pbr.freeze" in str(x) for x in chain), chain
     params = pbr.traverse(scene)
     import drjit as dr
     dr.enable_grad(params["red.reflectance.value"])

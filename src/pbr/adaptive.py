@@ -135,6 +135,9 @@ class Adaptive:
         if integ.job is not None:
             raise NotImplementedError(f"{integ.path}: an adaptive render cannot be split into passes "
                                       f"(pbr.distributed)")
+        if dr.flag(dr.JitFlag.FreezingScope):
+            raise NotImplementedError("render: adaptive sampling (target_relative_error, time_budget, return_info) "
+                                      "reads the film after each pass, which pbr.freeze cannot record")
         t0 = time.perf_counter()
         cam = scene.sensors[sensor]
         w, h = cam.film.size
