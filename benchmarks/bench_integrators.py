@@ -93,6 +93,8 @@ import pbr
 import drjit as dr
 from pbr import validate
 from pbr.plotting import pyplot
+# The error-vs-time helpers shared with pbr.convergence.
+from pbr.convergence import RELMSE_EPS, reference_floor, slope, time_to_reach, timed_render  # noqa: F401
 from pbr.integrators import INTEGRATORS
 
 HERE = Path(__file__).resolve().parent
@@ -119,7 +121,6 @@ EXCLUDED = {"ambientocclusion": "computes ambient occlusion, not radiance",
             "prb": "path's estimator (its primal pass is path's kernel): same curve"}
 BENCHED = UNBIASED + tuple(BIASED)
 REF_BATCHES = 16
-RELMSE_EPS = 1e-2
 CACHE_VERSION = 1
 # Errors at which the time-to-target ratios are read (path reaches them at the defaults).
 DEFAULT_TARGETS = {"cornell": 0.002, "indirect": 0.02, "caustic": 0.01, "crack": 0.01}
@@ -161,26 +162,6 @@ def load(d, integrator):
     return pbr.load_dict(d)
 
 
-def timed_render(scene, spp, seed, repeat_below=0.2, repeats=5):
-    """(image float64, warm wall seconds, warm CPU seconds, compile seconds): the wall
-    and process CPU time of one render, minus the kernel compilation Dr.Jit's kernel
-    history reports for it (single-threaded, so the same in both). Renders shorter than
-    ``repeat_below`` seconds are timed ``repeats`` times (same seed, warm), and the
-    medians kept: at that length the load of other jobs makes single timings jumpy."""
-    walls, cpus, comp, img = [], [], 0.0, None
-    for _ in range(repeats):
-        dr.kernel_history()                              # clear
-        t, c0 = time.perf_counter(), time.process_time()
-        out = np.asarray(pbr.render(scene, spp=spp, seed=seed, progress=False), dtype=np.float64)
-        wall, cpu = time.perf_counter() - t, time.process_time() - c0
-        c = sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in dr.kernel_history()) / 1000.0
-        img = out if img is None else img
-        comp += c
-        walls.append(max(wall - c, 0.0))
-        cpus.append(max(cpu - c, 0.0))
-        if walls[0] >= repeat_below:
-            break
-    return img, float(np.median(walls)), float(np.median(cpus)), comp
 
 
 # -- reference ---------------------------------------------------------------------------
@@ -207,35 +188,10 @@ def reference(name, d, res, max_depth, spp, cache_dir):
 
 def floor_of(ref, var):
     """The reference's own contribution to the expected relMSE of an independent image."""
-    return float(np.mean(var / (ref * ref + RELMSE_EPS)))
+    return reference_floor(ref, var, RELMSE_EPS)
 
 
 # -- analysis ----------------------------------------------------------------------------
-def time_to_reach(times, errors, target):
-    """Seconds at which a curve first reaches ``target`` (log-log interpolation between
-    the budgets around the crossing); None if it never does."""
-    prev = None
-    for t, e in zip(times, errors):
-        if e <= target:
-            if prev is None or prev[1] <= 0 or e <= 0 or prev[0] <= 0 or t <= 0:
-                return t
-            (t0, e0), lt = prev, math.log(target)
-            w = (math.log(e0) - lt) / (math.log(e0) - math.log(e))
-            return math.exp(math.log(t0) + w * (math.log(t) - math.log(t0)))
-        prev = (t, e)
-    return None
-
-
-def slope(budgets, errors, last=3):
-    """Least-squares slope of log relMSE vs log budget over the last ``last`` budgets
-    (-1 for an unbiased estimator; toward 0 where a bias dominates)."""
-    pts = [(math.log(b), math.log(e)) for b, e in zip(budgets, errors) if e > 0][-last:]
-    if len(pts) < 2:
-        return float("nan")
-    x, y = np.array(pts).T
-    return float(np.polyfit(x, y, 1)[0])
-
-
 def reach(r, target, unbiased, key="time_s"):
     """(seconds to reach ``target`` on the rows ``r`` of one curve, '' or '~' when
     extrapolated as 1/time from the last budget: unbiased curves whose slope is -1)."""

@@ -173,6 +173,17 @@ def test_usage_errors(fake, capsys):
     assert "render" not in fake
 
 
+def test_adaptive_options(tmp_path, monkeypatch, capsys):
+    """--target-error / --time-budget render adaptively (a real render) and print the estimate."""
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["render", "--backend", pbr.get_backend(), "--res", "12", "--spp", "128",
+                     "--target-error", "0.3", "--time-budget", "60"]) == 0
+    out = capsys.readouterr().out
+    assert "adaptive render: target relative error 0.3" in out and "rendered cornell: 12x12, mean " in out
+    assert cli.main(["render", "--target-error", "-1"]) == 2
+    assert "--target-error must be > 0" in capsys.readouterr().err
+
+
 def test_python_dash_m_entry(tmp_path):
     """``python -m pbr`` runs the CLI (a usage error here, so no rendering is needed)."""
     r = subprocess.run([sys.executable, "-m", "pbr", "render", str(tmp_path / "none.xml")],

@@ -353,6 +353,40 @@ def test_cache_progress_and_registry(box):
     assert integ.solve(scene, force=True, progress=False) is not sol   # re-solved on request
 
 
+def _block_errors(img, ref, res, light):
+    """(mean luminance ratio, median over 8x8-pixel blocks of the relative error of the
+    blocks' mean luminance), the light's pixels left out."""
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    x, r = np.asarray(img, np.float64) @ lum, ref @ lum
+    ratio = x[~light].mean() / r[~light].mean()
+    bx, br = (a.reshape(res // 8, 8, res // 8, 8).mean(axis=(1, 3)) for a in (x, r))
+    keep = ~light.reshape(res // 8, 8, res // 8, 8).any(axis=(1, 3))
+    return float(ratio), float(np.median(np.abs(bx - br)[keep] / br[keep]))
+
+
+def test_default_patch_budget_is_accurate():
+    """The default (``patch_budget`` 512: 504 patches on the Cornell box) renders the box
+    within the error docs/integrators.md states: image mean within 3% of ``path``
+    (max_depth -1, 2048 spp) and a median 8x8-block error below 4% (measured here, 32x32:
+    mean 0.975, block median 1.6%; 64x64, bench_defaults.py: 0.986, 2.5%). Must fail: the
+    old default, max_area 0 (the 36 mesh triangles), fails both (here 0.930 and 20%)."""
+    res = 32
+    d = pbr.cornell_box(res)
+    ref_scene = pbr.load_dict({**d, "integrator": {"type": "path", "max_depth": -1}})
+    ref = validate.estimate(lambda seed, spp: pbr.render(ref_scene, seed=seed, spp=spp, progress=False),
+                            2048, batches=16, seed=21).mean
+    light = (ref @ np.array([0.2126, 0.7152, 0.0722])) > 5.0
+    out = {}
+    for name, integ in (("default", {"type": "radiosity"}), ("max_area 0", {"type": "radiosity", "max_area": 0})):
+        s = pbr.load_dict({**d, "integrator": integ})
+        img = pbr.render(s, spp=64, seed=3, progress=False)
+        out[name] = (*_block_errors(img, ref, res, light), s.integrator.solution.patches.count)
+    mean, block, n = out["default"]
+    assert n == 504 and abs(mean - 1) < 0.03 and block < 0.04, out
+    mean0, block0, _ = out["max_area 0"]
+    assert abs(mean0 - 1) > 0.03 and block0 > 0.04, out
+
+
 @pytest.mark.parametrize("change, key", [
     (lambda d: d.update(ball={"type": "sphere", "radius": 0.2}), "scene.ball"),
     (lambda d: d["small-box"].update(bsdf={"type": "conductor"}), "scene.small-box.bsdf"),

@@ -13,6 +13,7 @@ from .backend import set_backend, get_backend, BackendError, VariantWarning  # n
 from .scene import load_dict, load_file, load_string, traverse, SceneError, SceneParameters  # noqa: F401
 from .scenes import cornell_box, materials_gallery  # noqa: F401
 from .render import render  # noqa: F401
+from .convergence import convergence  # noqa: F401
 from .freeze import freeze  # noqa: F401
 from .image import write_image, read_image, register_ipython_display  # noqa: F401
 

@@ -105,6 +105,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--on-nonfinite", choices=("warn", "raise", "ignore"), default="warn",
                    help="samples that are NaN or infinite count as 0: warn with their number "
                         "(default), fail (exit status 2) or ignore them")
+    r.add_argument("--target-error", type=float, metavar="E",
+                   help="adaptive sampling: each pixel gets the samples it needs for a relative standard "
+                        "error E (e.g. 0.05), --spp being the most any pixel gets (docs/speed_vs_accuracy.md)")
+    r.add_argument("--time-budget", type=float, metavar="S", help="stop rendering after S seconds")
     r.add_argument("-D", dest="defines", action="append", type=_define, default=[],
                    metavar="NAME=VALUE",
                    help="scene parameter override passed to load_file (repeatable); "
@@ -156,6 +160,13 @@ def _render(args) -> int:
     out = args.output or os.path.join("out", f"{name}.exr")
     if args.spp < 0:
         raise UsageError(f"--spp must be >= 0, got {args.spp}")
+    adaptive = {}
+    for opt, key, v in (("--target-error", "target_relative_error", args.target_error),
+                        ("--time-budget", "time_budget", args.time_budget)):
+        if v is not None:
+            if not v > 0:
+                raise UsageError(f"{opt} must be > 0, got {v}")
+            adaptive[key] = v
     targets = [out] + ([args.png] if args.png else [])
     for path in targets:  # fail before a long render, not after
         ext = os.path.splitext(path)[1].lower()
@@ -168,9 +179,14 @@ def _render(args) -> int:
     t0 = time.perf_counter()
     # np.asarray forces evaluation of Dr.Jit's lazy result, so the time includes
     # kernel compilation and execution.
+    info = None
     try:
-        img = np.asarray(pbr.render(scene, spp=args.spp, seed=args.seed, on_nonfinite=args.on_nonfinite),
-                         dtype=np.float32)
+        if adaptive:
+            img, info = pbr.render(scene, spp=args.spp, seed=args.seed, on_nonfinite=args.on_nonfinite,
+                                   return_info=True, **adaptive)
+        else:
+            img = pbr.render(scene, spp=args.spp, seed=args.seed, on_nonfinite=args.on_nonfinite)
+        img = np.asarray(img, dtype=np.float32)
     except FloatingPointError as e:     # --on-nonfinite raise
         raise UsageError(str(e)) from e
     elapsed = time.perf_counter() - t0
@@ -186,12 +202,15 @@ def _render(args) -> int:
         written.append(path)
 
     h, w = img.shape[:2]
-    spp = args.spp if args.spp > 0 else _scene_spp(scene)
+    if info is not None:
+        print(info.summary())
+    spp = info.mean_spp if info is not None else args.spp if args.spp > 0 else _scene_spp(scene)
     if spp is not None and elapsed > 0:
         rate = f"{w * h * spp / elapsed / 1e6:.2f} Msamples/s"
     else:
         rate = "? Msamples/s"
-    print(f"rendered {name}: {w}x{h}, {spp if spp is not None else '?'} spp, "
+    spp_text = "?" if spp is None else f"mean {spp:.1f}" if info is not None else spp
+    print(f"rendered {name}: {w}x{h}, {spp_text} spp, "
           f"{elapsed:.2f} s, {rate} -> {', '.join(written)}")
     return 0
 

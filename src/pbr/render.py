@@ -17,6 +17,7 @@ import numbers
 import drjit as dr
 
 from . import backend, dispatch
+from .adaptive import Adaptive, adaptive_render
 from .integrators.base import NonFinite
 from .samplers import seed_array
 from .scene.objects import as_integrator
@@ -110,7 +111,8 @@ class _RenderOp(dr.CustomOp):
 
 @backend.uses_pbr_variant
 def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, spp=0, spp_grad=0,
-           progress=None, on_nonfinite="warn"):
+           progress=None, on_nonfinite="warn", target_relative_error=None, time_budget=None,
+           return_info=False):
     """Render ``scene`` from sensor ``sensor``; returns ``mi.TensorXf`` (H, W, 3), linear
     sRGB (``np.asarray`` gives float32). ``spp=0`` uses the sensor's sampler count.
     ``integrator``: None (the scene's), an integrator dict, or ``pbr.load_dict`` of one.
@@ -122,7 +124,15 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
     ``RuntimeWarning`` with their number), 'raise' (``FloatingPointError``) or 'ignore'
     (not checked inside ``dr.freeze``). With gradients enabled the count is read after
     the derivative pass (``dr.backward``, ``dr.forward``), so that the render does not
-    wait for its image."""
+    wait for its image.
+
+    Adaptive sampling (``pbr.adaptive``): with ``target_relative_error`` (e.g. 0.05) each
+    pixel gets the samples a pilot estimate says it needs for that relative standard
+    error, ``spp`` being the most any pixel gets; ``time_budget`` (seconds) stops the
+    render when spent (alone: uniform passes until then). ``return_info=True`` returns
+    ``(image, pbr.adaptive.AdaptiveInfo)``: per-pixel sample counts and estimated
+    relative errors (with neither of the two, of a uniform ``spp`` render: the same
+    samples as without it)."""
     integrator = scene.integrator if integrator is None else as_integrator(integrator)
     spp, spp_grad = _count("spp", spp), _count("spp_grad", spp_grad)
     seed, seed_grad = _seed("seed", seed), _seed("seed_grad", seed_grad)
@@ -131,6 +141,9 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
         raise NotImplementedError("render: a shape's geometry has gradients enabled, but pbr does not "
                                   "differentiate geometry (no edge sampling or reparameterisation): disable "
                                   "them (dr.disable_grad)")
+    if target_relative_error is not None or time_budget is not None or return_info:
+        return _render_adaptive(scene, sensor, integrator, seed, spp, progress, counter, target_relative_error,
+                                time_budget, return_info)
     if not scene.requires_grad():
         with sensor_index(scene, sensor) as i:
             img = integrator.render(scene, sensor=i, seed=seed, spp=spp, progress=progress)
@@ -151,3 +164,15 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
     spp_grad = spp_grad or spp
     return dr.custom(_RenderOp, scene, values, sensor, integrator, (seed, seed_grad), (spp, spp_grad),
                      on_nonfinite)
+
+
+def _render_adaptive(scene, sensor, integrator, seed, spp, progress, counter, target, budget, return_info):
+    """pbr.render with per-pixel sample counts (pbr.adaptive); primal images only."""
+    if scene.requires_grad():
+        raise NotImplementedError("render: adaptive sampling (target_relative_error, time_budget, return_info) "
+                                  "renders primal images only: disable the parameters' gradients")
+    plan = Adaptive(target, budget)
+    with sensor_index(scene, sensor) as i, adaptive_render(integrator, plan):
+        img = integrator.render(scene, sensor=i, seed=seed, spp=spp, progress=progress)
+    counter.report()
+    return (img, plan.info) if return_info else img

@@ -150,6 +150,8 @@ class SamplingIntegrator:
     pass_separable = True
     # The PassJob of the current render (pass_job), None for a whole render.
     job = None
+    # The adaptive plan of the current render (pbr.adaptive), None for uniform spp.
+    adaptive = None
 
     def __init__(self, props):
         self.path = props.path
@@ -240,17 +242,21 @@ class SamplingIntegrator:
             textures.footprint = (cam, spp)
         return cam, w, h, spp, per_pass, spp // per_pass
 
-    def _camera_samples(self, cam, w, h, spp, per_pass, pass_index, seed, sampler=None, pixel=None, index=None):
+    def _camera_samples(self, cam, w, h, spp, per_pass, pass_index, seed, pixels=None, sampler=None,
+                        pixel=None, index=None):
         """Rays, wavelengths, filter weights and sample streams of one pass: the camera's
         sampler (or ``sampler``) starts a stream per (pixel, sample index), which gives the
         wavelength (1D), the filter's position in the pixel (2D) and the lens (2D), in
         pbrt-v4's order; the integrator draws the rest from it. A pass is every pixel's
-        samples ``pass_index * per_pass`` onward, pixel-major, unless ``pixel`` and
-        ``index`` (per-lane ``mi.UInt32``, index < spp) name the samples (adaptive passes)."""
+        samples ``pass_index * per_pass`` onward, pixel-major (``pixels``: only these
+        pixels, ``per_pass`` samples each: an adaptive render's pass, see pbr.adaptive),
+        unless ``pixel`` and ``index`` (per-lane ``mi.UInt32``, index < spp) name the samples."""
         if pixel is None:
-            idx = dr.arange(mi.UInt32, w * h * per_pass)
-            pixel = idx // per_pass
-            index = dr.opaque(mi.UInt32, pass_index) * per_pass + (idx - pixel * per_pass)
+            n = (w * h if pixels is None else dr.width(pixels)) * per_pass
+            idx = dr.arange(mi.UInt32, n)
+            slot = idx // per_pass
+            pixel = slot if pixels is None else dr.gather(mi.UInt32, pixels, slot)
+            index = dr.opaque(mi.UInt32, pass_index) * per_pass + (idx - slot * per_pass)
         sampler = sampler or cam.sampler
         rng = sampler.start(pixel, index, spp, (w, h), seed_array(seed))
         wl = SampledWavelengths.sample_visible(rng.next_1d())
@@ -269,6 +275,24 @@ class SamplingIntegrator:
             ray, self._ray_weight = cam.sample_ray(mi.Point2f(px / w, py / h), aperture, time), None
         return rng, wl, ray, weight, inside
 
+    def _pass_sums(self, scene, cam, w, h, spp, per_pass, p, seed, radiance, pixels=None, moments=False):
+        """Per-pixel film sums of pass ``p`` (see _film; ``pixels``: of those pixels only,
+        in their order). ``moments`` appends w^2 Y^2, w^2 Y and w^2 (Y: the sample's
+        luminance), the sums a pixel's variance is estimated from (pbr.adaptive)."""
+        rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed, pixels=pixels)
+        ray_weight = self._ray_weight
+        out = radiance(rng, ray, wl, inside)
+        L, extra = out if isinstance(out, tuple) else (out, ())
+        if ray_weight is not None:
+            L = L * ray_weight
+        extra = [*film_channels(scene, cam, rng, ray, wl, L, inside), *extra]
+        xyz = clamp_sample(cam.film, spec.to_xyz(L, wl))
+        xyz, *extra = self.counter().replace([xyz * weight, *extra], inside)
+        extra = [c * weight for c in extra]
+        stats = [xyz.y * xyz.y, xyz.y * weight, weight * weight] if moments else []
+        n = w * h if pixels is None else dr.width(pixels)
+        return _pixel_sums([*xyz, weight, *extra, *stats], n, per_pass)
+
     # -- rendering ------------------------------------------------------------------------
     def _film(self, scene, sensor, seed, spp, radiance, progress=None):
         """Develop an image from per-sample spectra ``radiance(rng, ray, wl, inside)``
@@ -278,6 +302,8 @@ class SamplingIntegrator:
         ``radiance`` may also return ``(spectrum, channels)``, ``channels`` a list of
         per-sample ``mi.Float`` (AOVs): they are developed with the same filter weights
         and appended after R, G, B, giving an (H, W, 3 + len(channels)) tensor."""
+        if self.adaptive is not None:       # per-pixel sample counts (pbr.adaptive)
+            return self.adaptive.film(self, scene, sensor, seed, spp, radiance, progress)
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
         sums, job = None, self.job
         bar = _progress(n_pass, progress)
@@ -288,17 +314,7 @@ class SamplingIntegrator:
                 if job is not None and p in job.given:
                     s = mi.Float(job.given[p])
                 else:
-                    rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
-                    ray_weight = self._ray_weight
-                    out = radiance(rng, ray, wl, inside)
-                    L, extra = out if isinstance(out, tuple) else (out, ())
-                    if ray_weight is not None:
-                        L = L * ray_weight
-                    extra = [*film_channels(scene, cam, rng, ray, wl, L, inside), *extra]
-                    xyz = clamp_sample(cam.film, spec.to_xyz(L, wl))
-                    xyz, *extra = self.counter().replace([xyz * weight, *extra], inside)
-                    extra = [c * weight for c in extra]
-                    s = _pixel_sums([*xyz, weight, *extra], w * h, per_pass)
+                    s = self._pass_sums(scene, cam, w, h, spp, per_pass, p, seed, radiance)
                     if job is not None:
                         job.sums[p] = np.array(s, dtype=np.float32)
                 sums = s if sums is None else sums + s

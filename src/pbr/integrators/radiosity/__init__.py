@@ -21,7 +21,7 @@ from .bins import WavelengthBins
 from .energy import energy_balance
 from .export import export_mesh, vertex_colors, vertex_values
 from .formfactors import form_factor_column, form_factor_matrix, shoot
-from .patches import Patches, check_materials
+from .patches import Patches, check_materials, max_area_for
 
 SOLVERS = ("gauss_seidel", "jacobi", "progressive", "stochastic_jacobi")
 MAX_DENSE_PATCHES = 16384   # the dense matrix of the Jacobi and Gauss-Seidel solvers: 1 GiB
@@ -92,7 +92,10 @@ class RadiosityIntegrator(SamplingIntegrator):
     ===================  ======  ============  ============================================================
     solver               string  gauss_seidel  'jacobi', 'gauss_seidel', 'progressive' or
                                                'stochastic_jacobi'
-    max_area             float   0             largest patch area (0: the mesh triangles as given)
+    max_area             float   auto          largest patch area (0: the mesh triangles as given); not
+                                               given: the smallest that keeps within patch_budget
+    patch_budget         int     512           most patches when max_area is not given (measured on
+                                               the Cornell box: docs/integrators.md)
     wavelength_bins      int     32            spectral bins of the solution (>= 4)
     max_iterations       int     10000         iteration limit of the solvers
     tolerance            float   1e-4          relative change of the total power (jacobi, gauss_seidel) or
@@ -109,7 +112,9 @@ class RadiosityIntegrator(SamplingIntegrator):
     def __init__(self, props):
         super().__init__(props)
         self.solver = props.string("solver", "gauss_seidel", choices=SOLVERS)
-        self.max_area = props.float("max_area", 0.0, min=0.0)
+        # max_area not given: the finest uniform subdivision within patch_budget patches
+        self.max_area = props.float("max_area", 0.0, min=0.0) if props.has("max_area") else None
+        self.patch_budget = props.int("patch_budget", 512, min=1)
         self.wavelength_bins = props.int("wavelength_bins", 32, min=4)
         self.max_iterations = props.int("max_iterations", 10000, min=1)
         self.tolerance = props.float("tolerance", 1e-4, min=0.0)
@@ -140,7 +145,8 @@ class RadiosityIntegrator(SamplingIntegrator):
     def _solve(self, scene, progress):
         t0 = time.perf_counter()
         check_materials(scene)
-        patches = Patches(scene, self.max_area)
+        max_area = self.max_area if self.max_area is not None else max_area_for(scene, self.patch_budget)
+        patches = Patches(scene, max_area)
         bins = WavelengthBins(self.wavelength_bins)
         Le, rho = patches.spectra(scene, bins)
         geo = scene.geometry

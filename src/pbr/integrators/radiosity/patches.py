@@ -63,6 +63,37 @@ def _mesh(shape):
     return v, f
 
 
+def split_counts(A: np.ndarray, max_area: float) -> np.ndarray:
+    """Edge segments ``n`` of each triangle of area ``A`` (``n^2`` patches) for
+    ``max_area`` (0: no split)."""
+    if max_area > 0:
+        return np.clip(np.ceil(np.sqrt(A / max_area) - 1e-9), 1, MAX_SPLIT).astype(np.int64)
+    return np.ones(len(A), np.int64)
+
+
+def max_area_for(scene, budget: int) -> float:
+    """The smallest ``max_area`` whose subdivision of the scene's mesh triangles has at
+    most ``budget`` patches (0, no split, when the triangles alone reach the budget):
+    the default of the ``radiosity`` integrator (``patch_budget``). Shapes that are not
+    meshes are skipped here (``Patches`` rejects them)."""
+    areas = []
+    for shape in scene.mi_scene.shapes():
+        if shape.is_mesh():
+            v, f = _mesh(shape)
+            areas.append(0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1))
+    A = np.concatenate(areas) if areas else np.zeros(0)
+    if len(A) == 0 or len(A) >= budget:
+        return 0.0
+    lo, hi = 0.0, float(A.max())       # hi: no triangle split (len(A) <= budget patches)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if int(np.sum(split_counts(A, mid) ** 2)) <= budget:
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
 class Patches:
     """The patches of a scene (numpy arrays, one row per patch) and the Dr.Jit tables
     that map a surface hit to its patch.
@@ -94,10 +125,7 @@ class Patches:
             sign = -1.0 if shape.has_flipped_normals() else 1.0   # flips normals, not the winding
             nrm = sign * cr / np.where(a2 > 0, a2, 1.0)[:, None]
             A = 0.5 * a2
-            if max_area > 0:
-                n = np.clip(np.ceil(np.sqrt(A / max_area) - 1e-9), 1, MAX_SPLIT).astype(np.int64)
-            else:
-                n = np.ones(len(f), np.int64)
+            n = split_counts(A, max_area)
             counts = n * n
             first = np.concatenate([[0], np.cumsum(counts)[:-1]])   # the shape's patches, by triangle
             tri_n.append(n)
