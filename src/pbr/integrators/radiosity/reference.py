@@ -16,7 +16,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from ...samplers import IndependentSampler
+from ...samplers import IndependentSampler, IndependentStream
 from ...plugins.props import Props
 from ...spectrum import SampledWavelengths
 from ..base import PRIMAL
@@ -54,7 +54,8 @@ def path_at_centroids(scene, patches, bins, spp: int, seed: int = 0, max_depth: 
         o = dr.fma(n, delta, dr.gather(mi.Point3f, cen, local))
         ray = mi.Ray3f(o, -n)
         wl = SampledWavelengths(mi.Spectrum([dr.gather(mi.Float, t, group) for t in lam_tab]), mi.Spectrum(1.0))
-        rng = IndependentSampler.make_rng(idx + dr.opaque(mi.UInt32, c0 * G * spp), dr.opaque(mi.UInt32, seed))
+        rng = IndependentStream(rng=IndependentSampler.make_rng(idx + dr.opaque(mi.UInt32, c0 * G * spp),
+                                                                 dr.opaque(mi.UInt32, seed)))
         si, shape = scene.geometry.intersect(ray, True)
         hit_patch, _ = patches.patch_of_hit(shape, si.prim_index, si.p, si.is_valid())
         ok = si.is_valid() & (hit_patch == patch)
