@@ -47,8 +47,8 @@ def test_path_converges_and_short_depth_is_biased(box):
     assert direct[-1]["relmse"] > 5 * path[-1]["relmse"], t
     assert all(r["time_s"] >= 0 and r["ref_floor"] > 0 for r in t)
     assert t.time_to(1e-9) == {"path": None, "direct only": None}
-    ax = t.plot(target=0.01)            # None without matplotlib (not a dependency)
-    assert ax is None or len(ax.get_lines()) == 3
+    ax = t.plot(target=0.01)            # matplotlib is in the test extra
+    assert ax is not None and len(ax.get_lines()) == 3
 
 
 def test_wrong_reference_is_seen(box):
