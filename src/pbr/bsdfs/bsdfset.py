@@ -177,12 +177,14 @@ class BSDFSet:
         self.local_of = mi.UInt32([i for _, i, _, _ in self.entries])
         self.back_of = mi.UInt32([b for _, _, b, _ in self.entries])
         self.opacity_of = mi.UInt32([o for _, _, _, o in self.entries])
+        self.opacity_reach = tuple(o for _, _, _, o in self.entries if o != NO_BACK)
         self.twosided = any(b != NO_BACK for _, _, b, _ in self.entries)
         n = len(self.entries)
         blend = [self.blend_of.get(i, (i, i, NO_BACK)) for i in range(n)]
         self.blend_a = mi.UInt32([x[0] for x in blend])
         self.blend_b = mi.UInt32([x[1] for x in blend])
         self.blend_w = mi.UInt32([x[2] for x in blend])
+        self.blend_reach = tuple(x[2] for x in blend if x[2] != NO_BACK)
         self.blends = bool(self.blend_of)
         self.mixed_delta = mi.Bool([i in self.blend_mixed_delta for i in range(n)]) if self.blend_mixed_delta else None
         pert = [self.perturb_of.get(i, (0, NO_BACK, 0.0, True, True)) for i in range(n)]
@@ -317,7 +319,7 @@ class BSDFSet:
             return None
         slot = dr.gather(mi.UInt32, self.opacity_of, bsdf_id, active)
         has = active & (slot != NO_BACK)
-        o = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, has, illuminant=False)[0]
+        o = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, has, illuminant=False, reach=self.opacity_reach)[0]
         return dr.select(has, dr.clip(o, 0.0, 1.0), 1.0)
 
     def _perturb(self, bsdf_id, ctx, active):
@@ -422,7 +424,7 @@ class BSDFSet:
         """(component a, component b, weight of b, is-blend mask) per lane."""
         slot = dr.gather(mi.UInt32, self.blend_w, bsdf_id, active)
         is_blend = active & (slot != NO_BACK)
-        w = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, is_blend, illuminant=False)[0]
+        w = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, is_blend, illuminant=False, reach=self.blend_reach)[0]
         a = dr.select(is_blend, dr.gather(mi.UInt32, self.blend_a, bsdf_id, is_blend), bsdf_id)
         b = dr.gather(mi.UInt32, self.blend_b, bsdf_id, is_blend)
         return a, b, dr.select(is_blend, dr.clip(w, 0.0, 1.0), 0.0), is_blend

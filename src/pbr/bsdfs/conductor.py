@@ -85,10 +85,12 @@ class Conductor(BSDFType):
 
     def build(self) -> None:
         self.eta, self.k, self.spec = (mi.UInt32([i[j] for i in self.instances]) for j in range(3))
+        self.reach = {id(t): tuple(i[j] for i in self.instances) for j, t in enumerate((self.eta, self.k, self.spec))}
 
     def _reflectance(self, ctx, idx, cos_i, active):
         tex, uv, lam = self.textures, ctx.si, ctx.wl.lambda_
-        ev = lambda t: tex.eval(dr.gather(mi.UInt32, t, idx, active), uv, lam, active, illuminant=False)  # noqa: E731
+        ev = lambda t: tex.eval(dr.gather(mi.UInt32, t, idx, active), uv, lam, active, illuminant=False,  # noqa: E731
+                                reach=self.reach.get(id(t)))
         return fresnel_conductor(cos_i, ev(self.eta), ev(self.k)) * ev(self.spec)
 
     def eval_pdf(self, ctx, idx, wo, active):
@@ -145,11 +147,14 @@ class RoughConductor(Conductor):
         super().build()
         self.au = mi.UInt32([i[3] for i in self.instances])
         self.av = mi.UInt32([i[4] for i in self.instances])
+        self.reach.update({id(self.au): tuple(i[3] for i in self.instances),
+                           id(self.av): tuple(i[4] for i in self.instances)})
         self.variant_table = VariantTable([i[5] for i in self.instances])
 
     def _roughness(self, ctx, idx, active):
         tex, uv, lam = self.textures, ctx.si, ctx.wl.lambda_
-        a = lambda t: tex.eval(dr.gather(mi.UInt32, t, idx, active), uv, lam, active, illuminant=False)[0]  # noqa: E731
+        a = lambda t: tex.eval(dr.gather(mi.UInt32, t, idx, active), uv, lam, active, illuminant=False,  # noqa: E731
+                               reach=self.reach.get(id(t)))[0]
         return a(self.au), a(self.av), self.variant_table.lane(idx, active)
 
     def eval_pdf(self, ctx, idx, wo, active):

@@ -53,6 +53,8 @@ class Plastic(BSDFType):
     def build(self) -> None:
         col = lambda k, t=mi.Float: t([i[k] for i in self.instances])  # noqa: E731
         self.diffuse, self.spec = col("diffuse", mi.UInt32), col("spec", mi.UInt32)
+        self.reach = {id(self.diffuse): tuple(i["diffuse"] for i in self.instances),
+                      id(self.spec): tuple(i["spec"] for i in self.instances)}
         self.eta, self.fdr_int, self.spec_weight = col("eta"), col("fdr_int"), col("spec_weight")
         self.nonlinear = col("nonlinear", mi.Bool)
         self.any_nonlinear = any(i["nonlinear"] for i in self.instances)
@@ -63,7 +65,8 @@ class Plastic(BSDFType):
 
     def _tex(self, table, ctx, idx, active):
         slot = dr.gather(mi.UInt32, table, idx, active)
-        return self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active, illuminant=False)
+        return self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active, illuminant=False,
+                                  reach=self.reach.get(id(table)))
 
     def _diffuse_term(self, ctx, idx, eta, fdr_int, f_i, f_o, active):
         """f_d * pi / cos: the diffuse albedo after coating losses and re-reflections."""
