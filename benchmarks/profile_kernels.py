@@ -201,14 +201,21 @@ def ptxas_info(path: str) -> str:
     return out
 
 
-def report(name: str, who: str, t: float, h: list, ir_dir: str | None):
+def kernel_ms(h: list) -> float:
+    """Execution time of the JIT kernels of a kernel history, ms."""
+    return sum(k.get("execution_time", 0.0) for k in h if k["type"] == dr.KernelType.JIT)
+
+
+def report(name: str, who: str, t: float, h: list, ir_dir: str | None, run_ms: float | None = None):
+    """One renderer's line: median wall time ``t`` (s), kernel time ``run_ms`` (median; by
+    default that of ``h``), and the kernels of history ``h``."""
     jit = [k for k in h if k["type"] == dr.KernelType.JIT]
     other = len(h) - len(jit)
-    run_ms = sum(k.get("execution_time", 0.0) for k in jit)
+    run_ms = kernel_ms(h) if run_ms is None else run_ms
     gen_ms = sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in jit)
     other_ms = sum(k.get("execution_time", 0.0) for k in h if k["type"] != dr.KernelType.JIT)
     print(f"  {who:8s} {t * 1e3:9.1f} ms wall, {len(jit)} JIT kernels ({run_ms:.1f} ms running, "
-          f"{gen_ms:.1f} ms IR generation and compilation, {sum(bool(k.get("cache_hit")) for k in jit)} cached), {other} other operations ({other_ms:.1f} ms); "
+          f"{gen_ms:.1f} ms IR generation and compilation, {sum(bool(k.get('cache_hit')) for k in jit)} cached), {other} other operations ({other_ms:.1f} ms); "
           f"trace and host {t * 1e3 - run_ms - gen_ms - other_ms:.1f} ms")
     for i, k in enumerate(sorted(jit, key=lambda k: -k.get("execution_time", 0.0))[:4]):
         line = (f"    kernel {i}: {k.get('operation_count', 0):6d} ops, size {k.get('size', 0):9d}, "
@@ -271,11 +278,18 @@ def main(argv=None):
             freeze_calls(d, a.spp, a.reps)
         if a.no_kernels:
             continue
-        for who, fn in (("pbr", run_pbr), ("mitsuba", run_mi)):
-            fn(0)                                               # compile
-            t, h = history(fn)
-            t = float(np.median([t] + [history(lambda: fn(k + 2))[0] for k in range(a.reps - 1)]))
-            report(name, who, t, h, a.ir_dir)
+        run_pbr(0), run_mi(0)                                   # compile
+        hs = {"pbr": [], "mitsuba": []}
+        for k in range(a.reps):                                 # interleaved
+            for who, fn in (("pbr", run_pbr), ("mitsuba", run_mi)):
+                hs[who].append(history(lambda: fn(k + 2)))
+        for who, runs in hs.items():
+            walls, kms = [t for t, _ in runs], [kernel_ms(h) for _, h in runs]
+            report(name, who, float(np.median(walls)), runs[int(np.argsort(kms)[len(kms) // 2])][1], a.ir_dir,
+                   float(np.median(kms)))
+        kr = np.median([kernel_ms(hp) / max(kernel_ms(hm), 1e-9) for (_, hp), (_, hm) in zip(hs["pbr"], hs["mitsuba"])])
+        wr = np.median([tp / tm for (tp, _), (tm, _) in zip(hs["pbr"], hs["mitsuba"])])
+        print(f"  pbr/Mitsuba: kernels {kr:.2f}, wall {wr:.2f} (medians of {a.reps} pairs)", flush=True)
         base = float(np.median([history(lambda: run_pbr(k + 9))[0] for k in range(a.reps)]))
         for flag in filter(None, a.flags.split(",")):
             f = getattr(dr.JitFlag, flag.lstrip("-"))
