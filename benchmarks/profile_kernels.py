@@ -275,7 +275,10 @@ def main(argv=None):
         if changes:
             ablate(name, d, a.spp, a.reps, changes)
         if a.freeze:
-            freeze_calls(d, a.spp, a.reps)
+            try:
+                freeze_calls(d, a.spp, a.reps)
+            except RuntimeError as e:   # e.g. the gallery: a virtual call Dr.Jit cannot record
+                print(f"  freeze: recording failed: {str(e).splitlines()[0][:200]}")
         if a.no_kernels:
             continue
         run_pbr(0), run_mi(0)                                   # compile
