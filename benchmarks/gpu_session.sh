@@ -58,7 +58,7 @@ for phase in $phases; do
     for b in ${BENCHES:-cornell scenes optim volpath}; do
       case $b in
       cornell) bench bench_cornell 90 benchmarks/bench_cornell.py --res 1024 --spp 256 --reps 3 ;;
-      scenes) bench bench_scenes 150 benchmarks/bench_scenes.py --res 1024 --spp 64 --reps 3 ;;
+      scenes) bench bench_scenes 240 benchmarks/bench_scenes.py --res 512 --spp 64 --reps 3 --quick ;;
       optim) bench bench_optim 80 benchmarks/bench_optim.py --res 1024 --spp 16 --reps 5 --no-children ;;
       volpath) bench bench_volpath 80 benchmarks/bench_volpath.py --res 512 --spp 64 --ref-spp 1024 --reps 3 ;;
       esac

@@ -7,11 +7,28 @@ sphere diffuse (``gallery-diffuse``: the cost of mixing 16 BSDF families in one 
 Run it where the time is lost: on CUDA the gallery took 4.8x Mitsuba's time on an H100
 (README, "CUDA"), the Cornell box 1.07x.
 
-Scenes are ``benchmarks/bench_scenes.py``'s (``cornell``, ``cornell-glossy``, ``gallery``,
-``caustic``, ``door``) plus ``gallery-diffuse``.
+Scenes are ``benchmarks/bench_scenes.py``'s (``--list`` there) plus ``gallery-diffuse``.
+
+Per kernel the IR size (characters of LLVM IR / PTX) is printed, and the wall time is
+split into kernel execution, Dr.Jit code generation and the rest (Python tracing of the
+integrator, host work): ``trace ms``.
+
+``--ablate``: attribution by ablation. Each named change is applied to the scene for
+both renderers where both have it, and the time ratio changed/default (process CPU
+time, interleaved pairs) is printed for pbr and Mitsuba: a part whose removal saves
+more in pbr than in Mitsuba is where pbr loses time. Changes: ``uniform-lights``
+(integrator ``light_sampler`` uniform: pbr only, Mitsuba always samples uniformly),
+``constant-textures`` (every checkerboard replaced by its first colour),
+``box-filter`` (film filter box instead of Gaussian), ``diffuse-only`` (every BSDF a
+grey diffuse one: the cost of the scene's BSDF families and their dispatch),
+``no-nee`` (``path`` without emitter sampling is not in Mitsuba: skipped).
+
+``--freeze``: per-call time of ``pbr.render`` and of the same call under ``pbr.freeze``
+(no Python tracing once recorded) next to ``mi.render``, at the scene's resolution.
 
     python benchmarks/profile_kernels.py --backend cuda --scenes gallery,gallery-diffuse --res 1024 --spp 64
     python benchmarks/profile_kernels.py --scenes cornell --flags=-SymbolicCalls,-OptimizeCalls --ir-dir out/ir
+    python benchmarks/profile_kernels.py --scenes bsdf-diffuse,light-point --flags= --ablate all --freeze
 """
 
 from __future__ import annotations
@@ -29,7 +46,7 @@ import pbr
 import drjit as dr
 import mitsuba as mi
 
-from bench_scenes import scene_dicts
+from bench_scenes import scene_dicts, interleaved_cpu
 from pbr.scene.xml import to_xml
 
 
@@ -37,6 +54,110 @@ from pbr.scene.xml import to_xml
 # turned off inside pbr's symbolic loops (Dr.Jit keeps them symbolic), so they are not here.
 DEFAULT_FLAGS = {"llvm": "-OptimizeCalls",
                  "cuda": "-OptimizeCalls,-ShaderExecutionReordering,-SpillToSharedMemory"}
+
+
+def _walk(d, fn):
+    """Apply fn(key, value) -> value to every (key, dict value) of a nested scene dict."""
+    for k, v in list(d.items()):
+        if isinstance(v, dict):
+            d[k] = fn(k, v)
+            if isinstance(d[k], dict):
+                _walk(d[k], fn)
+    return d
+
+
+def _constant_textures(d):
+    return _walk(d, lambda k, v: v.get("color0", 0.4) if v.get("type") == "checkerboard" else v)
+
+
+def _box_filter(d):
+    d["sensor"]["film"]["rfilter"] = {"type": "box"}
+    return d
+
+
+def _diffuse_only(d):
+    grey = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.5, 0.5, 0.5]}}
+    return _walk(d, lambda k, v: dict(grey) if k == "bsdf" or (k not in ("emitter", "sensor", "integrator", "film")
+                                                              and v.get("type") in BSDF_TYPES) else v)
+
+
+def _uniform_lights(d):
+    d["integrator"] = dict(d["integrator"], light_sampler="uniform")
+    return d
+
+
+# name -> (change to the dict, whether Mitsuba has it)
+ABLATIONS = {"uniform-lights": (_uniform_lights, False), "constant-textures": (_constant_textures, True),
+             "box-filter": (_box_filter, True), "diffuse-only": (_diffuse_only, True)}
+BSDF_TYPES = ()
+
+
+def _copy(d):
+    """A copy of a scene dict deep in its dicts (transforms and arrays shared)."""
+    return {k: _copy(v) if isinstance(v, dict) else v for k, v in d.items()}
+
+
+def ablate(name, d, spp, reps, changes):
+    """Print, for each change, pbr's and Mitsuba's time ratio changed/default."""
+    def runners(dd, dm):
+        sc, ms = pbr.load_dict(dd), mi.load_string(to_xml(dm))
+        seed = [100]
+
+        def rp():
+            seed[0] += 1
+            np.asarray(pbr.render(sc, spp=spp, seed=seed[0], progress=False))
+
+        def rm():
+            seed[0] += 1
+            img = mi.render(ms, spp=spp, seed=seed[0])
+            dr.eval(img)
+            np.asarray(img)
+        return rp, rm
+
+    base_p, base_m = runners(d, d)
+    for ch in changes:
+        fn, in_mi = ABLATIONS[ch]
+        try:
+            alt = fn(_copy(d))
+            alt_p, alt_m = runners(alt, alt if in_mi else d)
+        except Exception as e:   # a change that does not apply to this scene
+            print(f"  ablate {ch:18s} not applicable: {str(e).splitlines()[0][:120]}")
+            continue
+        *_, rp_wall, _, _, rp = interleaved_cpu(alt_p, base_p, reps)
+        line = f"  ablate {ch:18s} pbr {rp:5.2f}x (wall {rp_wall:5.2f}x)"
+        if in_mi:
+            *_, rm_wall, _, _, rm = interleaved_cpu(alt_m, base_m, reps)
+            line += f"   Mitsuba {rm:5.2f}x (wall {rm_wall:5.2f}x)"
+        print(line, flush=True)
+
+
+def freeze_calls(d, spp, reps):
+    """Per-call wall and CPU time of pbr.render, pbr.freeze(pbr.render) and mi.render."""
+    sc, ms = pbr.load_dict(d), mi.load_string(to_xml(d))
+    frozen = pbr.freeze(lambda scene, seed: pbr.render(scene, spp=spp, seed=seed, progress=False,
+                                                       on_nonfinite="ignore"))
+    k = [0]
+
+    def plain():
+        k[0] += 1
+        np.asarray(pbr.render(sc, spp=spp, seed=k[0], progress=False))
+
+    def froz():
+        k[0] += 1
+        np.asarray(frozen(sc, dr.opaque(mi.UInt32, k[0])))
+
+    def mits():
+        k[0] += 1
+        img = mi.render(ms, spp=spp, seed=k[0])
+        dr.eval(img)
+        np.asarray(img)
+
+    froz()                           # record
+    wf, wp, rw, cf, cp, rc = interleaved_cpu(froz, plain, reps)
+    _, wm, rwm, _, cm, rcm = interleaved_cpu(plain, mits, reps)
+    print(f"  freeze: pbr.render {wp * 1e3:8.1f} ms ({cp * 1e3:8.1f} cpu), frozen {wf * 1e3:8.1f} ms "
+          f"({cf * 1e3:8.1f} cpu): frozen/plain {rw:.2f} wall, {rc:.2f} cpu; Mitsuba {wm * 1e3:8.1f} ms "
+          f"({cm * 1e3:8.1f} cpu): plain/Mitsuba {rwm:.2f} wall, {rcm:.2f} cpu", flush=True)
 
 
 def scenes(res: int, spp: int) -> dict:
@@ -80,15 +201,26 @@ def ptxas_info(path: str) -> str:
     return out
 
 
-def report(name: str, who: str, t: float, h: list, ir_dir: str | None):
+def kernel_ms(h: list) -> float:
+    """Execution time of the JIT kernels of a kernel history, ms."""
+    return sum(k.get("execution_time", 0.0) for k in h if k["type"] == dr.KernelType.JIT)
+
+
+def report(name: str, who: str, t: float, h: list, ir_dir: str | None, run_ms: float | None = None):
+    """One renderer's line: median wall time ``t`` (s), kernel time ``run_ms`` (median; by
+    default that of ``h``), and the kernels of history ``h``."""
     jit = [k for k in h if k["type"] == dr.KernelType.JIT]
     other = len(h) - len(jit)
-    run_ms = sum(k.get("execution_time", 0.0) for k in jit)
-    print(f"  {who:8s} {t * 1e3:9.1f} ms wall, {len(jit)} JIT kernels ({run_ms:.1f} ms running), "
-          f"{other} other operations (memcpy/memset/reductions)")
+    run_ms = kernel_ms(h) if run_ms is None else run_ms
+    gen_ms = sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in jit)
+    other_ms = sum(k.get("execution_time", 0.0) for k in h if k["type"] != dr.KernelType.JIT)
+    print(f"  {who:8s} {t * 1e3:9.1f} ms wall, {len(jit)} JIT kernels ({run_ms:.1f} ms running, "
+          f"{gen_ms:.1f} ms IR generation and compilation, {sum(bool(k.get('cache_hit')) for k in jit)} cached), {other} other operations ({other_ms:.1f} ms); "
+          f"trace and host {t * 1e3 - run_ms - gen_ms - other_ms:.1f} ms")
     for i, k in enumerate(sorted(jit, key=lambda k: -k.get("execution_time", 0.0))[:4]):
         line = (f"    kernel {i}: {k.get('operation_count', 0):6d} ops, size {k.get('size', 0):9d}, "
-                f"{k.get('execution_time', 0.0):8.2f} ms, optix {bool(k.get('uses_optix'))}")
+                f"{k.get('execution_time', 0.0):8.2f} ms, IR {len(k['ir'].getvalue()) if 'ir' in k else 0:8d} chars, "
+                f"optix {bool(k.get('uses_optix'))}")
         if ir_dir and "ir" in k:
             ext = "ptx" if pbr.get_backend() == "cuda" else "ll"
             path = os.path.join(ir_dir, f"{name}_{who}_{i}.{ext}")
@@ -111,14 +243,22 @@ def main(argv=None):
                          f"(default: {DEFAULT_FLAGS})")
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--ir-dir", default=None, help="write the 4 slowest kernels' IR (and ptxas figures) here")
+    ap.add_argument("--ablate", default="", help=f"comma-separated changes or 'all' ({', '.join(ABLATIONS)})")
+    ap.add_argument("--freeze", action="store_true", help="time pbr.render under pbr.freeze too")
+    ap.add_argument("--no-kernels", action="store_true", help="skip the kernel report")
     a = ap.parse_args(argv)
+    global BSDF_TYPES
+    from pbr.bsdfs import bsdf_names
+    BSDF_TYPES = tuple(bsdf_names())
+    changes = list(ABLATIONS) if a.ablate == "all" else [c for c in a.ablate.split(",") if c]
     pbr.set_backend(a.backend)
     if a.flags is None:
         a.flags = DEFAULT_FLAGS[pbr.get_backend()]
     if a.ir_dir:
         os.makedirs(a.ir_dir, exist_ok=True)
     dicts = scenes(a.res, a.spp)
-    print(f"backend {pbr.get_backend()}, {a.res} wide, {a.spp} spp; times are medians of {a.reps}")
+    print(f"backend {pbr.get_backend()}, {a.res} wide, {a.spp} spp; times are medians of {a.reps}; "
+          f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
     for name in a.scenes.split(","):
         d = dicts[name]
         scene, mscene = pbr.load_dict(d), mi.load_string(to_xml(d))
@@ -131,12 +271,28 @@ def main(argv=None):
             dr.eval(img)
             np.asarray(img)
 
-        print(f"{name}:")
-        for who, fn in (("pbr", run_pbr), ("mitsuba", run_mi)):
-            fn(0)                                               # compile
-            t, h = history(fn)
-            t = float(np.median([t] + [history(lambda: fn(k + 2))[0] for k in range(a.reps - 1)]))
-            report(name, who, t, h, a.ir_dir)
+        print(f"{name}:", flush=True)
+        if changes:
+            ablate(name, d, a.spp, a.reps, changes)
+        if a.freeze:
+            try:
+                freeze_calls(d, a.spp, a.reps)
+            except RuntimeError as e:   # e.g. the gallery: a virtual call Dr.Jit cannot record
+                print(f"  freeze: recording failed: {str(e).splitlines()[0][:200]}")
+        if a.no_kernels:
+            continue
+        run_pbr(0), run_mi(0)                                   # compile
+        hs = {"pbr": [], "mitsuba": []}
+        for k in range(a.reps):                                 # interleaved
+            for who, fn in (("pbr", run_pbr), ("mitsuba", run_mi)):
+                hs[who].append(history(lambda: fn(k + 2)))
+        for who, runs in hs.items():
+            walls, kms = [t for t, _ in runs], [kernel_ms(h) for _, h in runs]
+            report(name, who, float(np.median(walls)), runs[int(np.argsort(kms)[len(kms) // 2])][1], a.ir_dir,
+                   float(np.median(kms)))
+        kr = np.median([kernel_ms(hp) / max(kernel_ms(hm), 1e-9) for (_, hp), (_, hm) in zip(hs["pbr"], hs["mitsuba"])])
+        wr = np.median([tp / tm for (tp, _), (tm, _) in zip(hs["pbr"], hs["mitsuba"])])
+        print(f"  pbr/Mitsuba: kernels {kr:.2f}, wall {wr:.2f} (medians of {a.reps} pairs)", flush=True)
         base = float(np.median([history(lambda: run_pbr(k + 9))[0] for k in range(a.reps)]))
         for flag in filter(None, a.flags.split(",")):
             f = getattr(dr.JitFlag, flag.lstrip("-"))

@@ -1,5 +1,6 @@
 """blendbsdf (Mitsuba) / mix (pbrt-v4): f = (1 - w) f_0 + w f_1, mixture-consistent sampling."""
 
+import drjit as dr
 import numpy as np
 import pytest
 import mitsuba as mi
@@ -50,3 +51,44 @@ def test_matches_mitsuba(scale):
     res = compare_with_mitsuba(d, scale)
     print(res.summary())
     assert res.passed, res.summary()
+
+
+def test_blend_components_dispatch_over_their_families_only():
+    """A blend evaluates its other component with a dispatch over the families blend
+    components have (twosided back sides included), not over every family of the scene:
+    the values equal those of a dispatch over all families, for lanes on both sides."""
+    from pbr.scene.loader import Loader
+    from bsdf_harness import OneBSDF
+    blend = {"type": "blendbsdf", "weight": 0.4,
+             "a": {"type": "twosided", "a": A, "b": {"type": "plastic"}},
+             "b": {"type": "roughconductor", "material": "Cu", "alpha": 0.2}}
+    one = OneBSDF(blend)
+    B = one.bsdfs
+    # Other families in the same set, as in a scene with more materials (the dicts stay
+    # alive: the loader caches parsed BSDFs by the dict's identity).
+    loader = one.loader
+    others = [{"type": "dielectric"}, {"type": "conductor"}, {"type": "principled"}]
+    for k, d in enumerate(others):
+        loader.bsdf(d, f"scene.other{k}")
+    loader.textures.build()
+    B.build(loader.textures)
+    assert set(B.component_families) == {"diffuse", "plastic", "roughconductor"} < set(B.order)
+    rng = np.random.default_rng(5)
+    n = 4096
+    wi = mi.Vector3f(*rng.normal(size=(3, n)).astype(np.float32))
+    wi = dr.normalize(wi)
+    wo = dr.normalize(mi.Vector3f(*rng.normal(size=(3, n)).astype(np.float32)))
+    u1, u2 = mi.Float(rng.random(n).astype(np.float32)), mi.Point2f(*rng.random((2, n)).astype(np.float32))
+    ids = mi.UInt32(one.id) + dr.zeros(mi.UInt32, n)
+
+    def run():
+        f, pdf, bs = B.eval_pdf_sample(ids, one.ctx(wi, n), wo, u1, u2, mi.Bool(True))
+        fe, pe = B.eval_pdf(ids, one.ctx(wi, n), wo, mi.Bool(True))
+        return [np.array(x) for x in (f, pdf, bs.weight, bs.pdf, fe, pe)]
+
+    restricted = run()
+    B.component_families, B.component_family_of = B.order, B.family_of       # every family
+    full = run()
+    assert np.abs(restricted[4]).max() > 0
+    for a, b in zip(restricted, full):
+        np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-7)

@@ -18,7 +18,7 @@ import trimesh
 
 import pbr
 from pbr import validate
-from pbr.lights.bvh import BoundsTable, BVHLightSampler, LightBVH, cone_union
+from pbr.lights.bvh import BoundsTable, BVHLightSampler, LightBVH, cone_union, ensure_table
 from pbr.lights.lightsamplers import make_light_sampler
 
 RES, SPP, BATCHES = 24, 1024, 16
@@ -235,9 +235,15 @@ def test_bvh_degenerate_inputs():
     """One light; all lights at one point; nothing but infinite lights."""
     one = [{"p_min": [0, 0, 1], "p_max": [0, 0, 1], "phi": 2.0, "w": [0, 0, -1], "cos_theta_o": 1.0,
             "cos_theta_e": 0.0, "two_sided": False}]
-    s = make_light_sampler("bvh", [1.0], one)
+    s = BVHLightSampler(ensure_table(one, 1))
     light, q = s.sample(mi.Float([0.3, 0.7]), mi.Point3f([0, 0], [0, 0], [0, 2]), mi.Normal3f(0, 0, 1))
     assert list(np.array(q)) == [1.0, 0.0]               # the second point is behind the light
+    # The 'bvh' light sampler of a one-light scene chooses that light everywhere (where
+    # the BVH gives 0 the light contributes nothing): the same image, no importance.
+    s = make_light_sampler("bvh", [1.0], one)
+    assert not isinstance(s, BVHLightSampler) and s.kind == "uniform"
+    light, q = s.sample(mi.Float([0.3, 0.7]), mi.Point3f([0, 0], [0, 0], [0, 2]), mi.Normal3f(0, 0, 1))
+    assert np.all(np.array(light) == 0) and np.all(np.array(q) == 1.0)
     same = [dict(one[0], w=[0, 0, 1], cos_theta_o=-1.0) for _ in range(9)]
     s = make_light_sampler("bvh", np.ones(9), same)
     pmf = np.array(s.pmf(mi.UInt32(np.arange(9, dtype=np.uint32)), mi.Point3f(1, 1, 0), mi.Normal3f(0, 0, 1)))

@@ -87,6 +87,36 @@ def test_descent_only_follows_deep_children(monkeypatch):
     assert len(calls) == 4
 
 
+def test_reach_traces_only_what_the_slots_use():
+    """``eval(..., reach=slots)`` (what BSDF families pass: their instances' slots) gives
+    the values of an unrestricted evaluation, for every slot of a set that mixes every
+    kind and spectrum base, while tracing only what the slots reach (an RGB albedo's
+    lookup holds no tabulated-spectrum or bitmap code)."""
+    bmp = {"type": "bitmap", "data": _img(), "filter_type": "bilinear"}
+    rgb = {"type": "rgb", "value": [0.7, 0.2, 0.1]}
+    t = Tex({"rgb": rgb, "tab": A, "bmp": bmp,
+             "ck": {"type": "checkerboard", "color0": rgb, "color1": B},
+             "m": {"type": "mix", "tex1": bmp, "tex2": A, "amount": {"type": "checkerboard"}}})
+    uv = np.array(UV4 + [(0.1, 0.9), (0.6, 0.4)])
+    lam = mi.Spectrum(*[mi.Float(l) + dr.zeros(mi.Float, len(uv)) for l in LAM])
+    st = mi.Point2f(mi.Float(uv[:, 0]), mi.Float(uv[:, 1]))
+
+    def ev(slot, reach):
+        s = mi.UInt32(slot) + dr.zeros(mi.UInt32, len(uv))
+        return np.array(t.set.eval(s, st, lam, mi.Bool(True), reach=reach))
+
+    for name, slot in t.slots.items():
+        assert np.allclose(ev(slot, (slot,)), ev(slot, None), rtol=1e-6, atol=1e-7), name
+    both = (t.slots["rgb"], t.slots["ck"])
+    assert np.allclose(ev(t.slots["ck"], both), ev(t.slots["ck"], None), rtol=1e-6)
+    f_all, f_rgb = t.set.features(), t.set.features((t.slots["rgb"],))
+    assert f_all.has_table and f_all.bitmaps and f_all.composites
+    assert not (f_rgb.has_table or f_rgb.bitmaps or f_rgb.composites or f_rgb.checkers)
+    assert f_rgb.leaf_kinds == {tx.CONSTANT}
+    f_ck = t.set.features((t.slots["ck"],))           # a checkerboard reaches its colours
+    assert f_ck.has_table and f_ck.has_sigmoid and f_ck.checkers and not f_ck.bitmaps
+
+
 def _img():
     img = np.zeros((2, 2, 3), np.float32)
     img[0, 0] = [0.8, 0.1, 0.1]

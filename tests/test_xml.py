@@ -499,3 +499,24 @@ def test_root_and_parameter_errors(tmp_path):
     write(tmp_path, "loop.xml", scene_xml('\n<include filename="loop.xml"/>'))
     with pytest.raises(XMLError, match=r"loop\.xml:3: .*recursive include"):
         parse_file(tmp_path / "loop.xml")
+
+
+def test_to_xml_writes_volumes_as_volume_elements(tmp_path):
+    """A gridvolume nested in a medium is a <volume> (it was written as a <shape>, which
+    Mitsuba refuses: 'is of type "volume", which does not match the expected type "shape"')."""
+    from pbr.media.grid import write_vol
+    from pbr.scene.xml import to_xml
+    vol = str(tmp_path / "g.vol")
+    write_vol(vol, np.ones((2, 2, 2), np.float32))
+    d = {"type": "scene",
+         "cube": {"type": "cube", "bsdf": {"type": "null"},
+                  "interior": {"type": "heterogeneous",
+                               "sigma_t": {"type": "gridvolume", "filename": vol},
+                               "albedo": {"type": "constvolume", "value": 0.5}}}}
+    xml = to_xml(d)
+    assert '<volume type="gridvolume" name="sigma_t">' in xml
+    assert '<volume type="constvolume" name="albedo">' in xml
+    from pbr import validate
+    mi.set_variant(validate.mitsuba_variant())
+    mi.load_string(xml)                  # Mitsuba reads it
+    pbr.load_string(xml)                 # and so does pbr

@@ -177,13 +177,25 @@ class BSDFSet:
         self.local_of = mi.UInt32([i for _, i, _, _ in self.entries])
         self.back_of = mi.UInt32([b for _, _, b, _ in self.entries])
         self.opacity_of = mi.UInt32([o for _, _, _, o in self.entries])
+        self.opacity_reach = tuple(o for _, _, _, o in self.entries if o != NO_BACK)
         self.twosided = any(b != NO_BACK for _, _, b, _ in self.entries)
         n = len(self.entries)
         blend = [self.blend_of.get(i, (i, i, NO_BACK)) for i in range(n)]
         self.blend_a = mi.UInt32([x[0] for x in blend])
         self.blend_b = mi.UInt32([x[1] for x in blend])
         self.blend_w = mi.UInt32([x[2] for x in blend])
+        self.blend_reach = tuple(x[2] for x in blend if x[2] != NO_BACK)
         self.blends = bool(self.blend_of)
+        # The families a blend's components (and their twosided back sides) belong to: a
+        # blend's evaluations of its other component dispatch over these only, not over
+        # every family of the scene (the gallery's blend of a diffuse and a rough
+        # conductor traced all 16 families twice more per vertex).
+        comp = {e for a, b, _ in self.blend_of.values() for e in (a, b)}
+        comp |= {self.entries[e][2] for e in comp if self.entries[e][2] != NO_BACK}
+        comp_fams = {self.entries[e][0] for e in comp}
+        self.component_families = [t for t in self.order if t in comp_fams]
+        self.component_family_of = mi.UInt32([self.component_families.index(t) if t in comp_fams else 0
+                                              for t, _, _, _ in self.entries])
         self.mixed_delta = mi.Bool([i in self.blend_mixed_delta for i in range(n)]) if self.blend_mixed_delta else None
         pert = [self.perturb_of.get(i, (0, NO_BACK, 0.0, True, True)) for i in range(n)]
         self.pert_kind = mi.UInt32([x[0] for x in pert])
@@ -293,12 +305,16 @@ class BSDFSet:
         _, frame, has = pert
         return dr.select(has, ctx.si.to_world(frame.n), n)
 
-    def _dispatch(self, method, bsdf_id, ctx, active, *args):
+    def _dispatch(self, method, bsdf_id, ctx, active, *args, components=False):
+        """``method`` of each lane's family; ``components``: the active lanes hold blend
+        components only, so only their families are dispatched over."""
         local = dr.gather(mi.UInt32, self.local_of, bsdf_id, active)
-        fams = [self.families[t] for t in self.order]
+        order, family_of = ((self.component_families, self.component_family_of) if components
+                            else (self.order, self.family_of))
+        fams = [self.families[t] for t in order]
         if len(fams) == 1:
             return _cast(getattr(fams[0], method)(ctx, local, *args, active))
-        fam = dr.gather(mi.UInt32, self.family_of, bsdf_id, active)
+        fam = dr.gather(mi.UInt32, family_of, bsdf_id, active)
         return dispatch.switch(fam, [_typed(getattr(f, method)) for f in fams], ctx, local, *args, active)
 
     def _side(self, bsdf_id, ctx, active):
@@ -317,7 +333,7 @@ class BSDFSet:
             return None
         slot = dr.gather(mi.UInt32, self.opacity_of, bsdf_id, active)
         has = active & (slot != NO_BACK)
-        o = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, has, illuminant=False)[0]
+        o = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, has, illuminant=False, reach=self.opacity_reach)[0]
         return dr.select(has, dr.clip(o, 0.0, 1.0), 1.0)
 
     def _perturb(self, bsdf_id, ctx, active):
@@ -365,16 +381,16 @@ class BSDFSet:
             f = f * dr.select(has, perturb.shadow_terminator(frame.n, wo), 1.0)
         return dr.select(ok, f, 0.0), (None if pdf is None else dr.select(ok, pdf, 0.0))
 
-    def _entry_eval_pdf(self, bsdf_id, ctx, wo, active):
+    def _entry_eval_pdf(self, bsdf_id, ctx, wo, active, components=False):
         opacity = self._opacity(bsdf_id, ctx, active)
         bsdf_id, ctx, wo, flip, pert = self._resolve(bsdf_id, ctx, wo, active)
         if pert is not None:
             ctx, frame, has = pert
             wo_p, ok = self._to_perturbed(frame, has, wo)
-            f, pdf = self._dispatch("eval_pdf", bsdf_id, ctx, active & ok, wo_p)
+            f, pdf = self._dispatch("eval_pdf", bsdf_id, ctx, active & ok, wo_p, components=components)
             f, pdf = self._perturbed_value(frame, has, wo, ok, f, pdf)
         else:
-            f, pdf = self._dispatch("eval_pdf", bsdf_id, ctx, active, wo)
+            f, pdf = self._dispatch("eval_pdf", bsdf_id, ctx, active, wo, components=components)
         if opacity is not None:
             f, pdf = f * opacity, pdf * opacity
         return f, pdf
@@ -422,7 +438,7 @@ class BSDFSet:
         """(component a, component b, weight of b, is-blend mask) per lane."""
         slot = dr.gather(mi.UInt32, self.blend_w, bsdf_id, active)
         is_blend = active & (slot != NO_BACK)
-        w = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, is_blend, illuminant=False)[0]
+        w = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, is_blend, illuminant=False, reach=self.blend_reach)[0]
         a = dr.select(is_blend, dr.gather(mi.UInt32, self.blend_a, bsdf_id, is_blend), bsdf_id)
         b = dr.gather(mi.UInt32, self.blend_b, bsdf_id, is_blend)
         return a, b, dr.select(is_blend, dr.clip(w, 0.0, 1.0), 0.0), is_blend
@@ -433,7 +449,7 @@ class BSDFSet:
             return self._entry_eval_pdf(bsdf_id, ctx, wo, active)
         a, b, w, is_blend = self._blend(bsdf_id, ctx, active)
         fa, pa = self._entry_eval_pdf(a, ctx, wo, active)
-        fb, pb = self._entry_eval_pdf(b, ctx, wo, is_blend)
+        fb, pb = self._entry_eval_pdf(b, ctx, wo, is_blend, components=True)
         return dr.fma(w, fb - fa, fa), dr.fma(w, pb - pa, pa)
 
     def sample(self, bsdf_id, ctx, u1, u2, active) -> BSDFSample:
@@ -456,7 +472,7 @@ class BSDFSet:
         wc = dr.select(take_b, w, 1.0 - w)
         if wo is not None:
             # eval toward wo: the other component as well.
-            fo, po = self._entry_eval_pdf(other, ctx, wo, is_blend)
+            fo, po = self._entry_eval_pdf(other, ctx, wo, is_blend, components=True)
             f = dr.select(is_blend, wc * f + (1.0 - wc) * fo, f)
             pdf = dr.select(is_blend, wc * pdf + (1.0 - wc) * po, pdf)
         # The sampled direction: mixture density and weight unless the lobe was a delta
@@ -467,7 +483,7 @@ class BSDFSet:
         else:
             mix &= ~bs.delta | dr.gather(mi.Bool, self.mixed_delta, bsdf_id, is_blend)
         f_c = bs.weight * bs.pdf
-        f2, p2 = self._entry_eval_pdf(other, ctx, bs.wo, mix)
+        f2, p2 = self._entry_eval_pdf(other, ctx, bs.wo, mix, components=True)
         p_mix = wc * bs.pdf + (1.0 - wc) * p2
         f_mix = wc * f_c + (1.0 - wc) * f2
         bs.weight = dr.select(mix, f_mix / dr.maximum(p_mix, 1e-30), bs.weight)

@@ -85,11 +85,14 @@ class Conductor(BSDFType):
 
     def build(self) -> None:
         self.eta, self.k, self.spec = (mi.UInt32([i[j] for i in self.instances]) for j in range(3))
+        # The slots each parameter's lookup can reach (TextureSet.eval's reach).
+        self.reach = {name: tuple(i[j] for i in self.instances) for j, name in enumerate(("eta", "k", "spec"))}
 
     def _reflectance(self, ctx, idx, cos_i, active):
         tex, uv, lam = self.textures, ctx.si, ctx.wl.lambda_
-        ev = lambda t: tex.eval(dr.gather(mi.UInt32, t, idx, active), uv, lam, active, illuminant=False)  # noqa: E731
-        return fresnel_conductor(cos_i, ev(self.eta), ev(self.k)) * ev(self.spec)
+        ev = lambda n: tex.eval(dr.gather(mi.UInt32, getattr(self, n), idx, active), uv, lam, active,  # noqa: E731
+                                illuminant=False, reach=self.reach[n])
+        return fresnel_conductor(cos_i, ev("eta"), ev("k")) * ev("spec")
 
     def eval_pdf(self, ctx, idx, wo, active):
         return mi.Spectrum(0.0), mi.Float(0.0)
@@ -145,12 +148,14 @@ class RoughConductor(Conductor):
         super().build()
         self.au = mi.UInt32([i[3] for i in self.instances])
         self.av = mi.UInt32([i[4] for i in self.instances])
+        self.reach.update({"au": tuple(i[3] for i in self.instances), "av": tuple(i[4] for i in self.instances)})
         self.variant_table = VariantTable([i[5] for i in self.instances])
 
     def _roughness(self, ctx, idx, active):
         tex, uv, lam = self.textures, ctx.si, ctx.wl.lambda_
-        a = lambda t: tex.eval(dr.gather(mi.UInt32, t, idx, active), uv, lam, active, illuminant=False)[0]  # noqa: E731
-        return a(self.au), a(self.av), self.variant_table.lane(idx, active)
+        a = lambda n: tex.eval(dr.gather(mi.UInt32, getattr(self, n), idx, active), uv, lam, active,  # noqa: E731
+                               illuminant=False, reach=self.reach[n])[0]
+        return a("au"), a("av"), self.variant_table.lane(idx, active)
 
     def eval_pdf(self, ctx, idx, wo, active):
         wi = ctx.si.wi

@@ -190,7 +190,7 @@ class _Dielectric(BSDFType):
             if any(s is not None for s in slots):
                 # (slot table, whether some instance lacks the texture)
                 self.tex[name] = (mi.UInt32([_NO_TEXTURE if s is None else s for s in slots]),
-                                  any(s is None for s in slots))
+                                  any(s is None for s in slots), tuple(s for s in slots if s is not None))
 
     def _eta_of(self, ctx, idx, active):
         """Relative IOR per lane; a dispersive instance uses its value at the first
@@ -216,12 +216,12 @@ class _Dielectric(BSDFType):
         no instance of the family sets it (nothing to multiply)."""
         if name not in self.tex:
             return None
-        table, some_missing = self.tex[name]
+        table, some_missing, reach = self.tex[name]
         slot = dr.gather(mi.UInt32, table, idx, active)
         if not some_missing:
-            return self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active, illuminant=False)
+            return self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active, illuminant=False, reach=reach)
         has = slot != _NO_TEXTURE
-        v = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active & has, illuminant=False)
+        v = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active & has, illuminant=False, reach=reach)
         return dr.select(has, v, 1.0)
 
     def _lobe_weight(self, ctx, idx, sel_r, w_r, w_t, active):
@@ -358,14 +358,17 @@ class RoughDielectric(_Dielectric):
         self.anisotropic = any(i["alpha"][0] != i["alpha"][1] for i in self.instances)
         self.alpha_u = mi.UInt32([i["alpha"][0] for i in self.instances])
         self.alpha_v = mi.UInt32([i["alpha"][1] for i in self.instances])
+        self.alpha_reach = (tuple(i["alpha"][0] for i in self.instances), tuple(i["alpha"][1] for i in self.instances))
 
     # -- per-hit parameters ----------------------------------------------------------
     def _params(self, ctx, idx, active):
         """(eta, alpha_u, alpha_v, variant index or None) at this hit."""
         eta = self._eta_of(ctx, idx, active)
         uv, lam = ctx.si, ctx.wl.lambda_
-        au = self.textures.eval(dr.gather(mi.UInt32, self.alpha_u, idx, active), uv, lam, active, illuminant=False)[0]
-        av = (self.textures.eval(dr.gather(mi.UInt32, self.alpha_v, idx, active), uv, lam, active, illuminant=False)[0]
+        au = self.textures.eval(dr.gather(mi.UInt32, self.alpha_u, idx, active), uv, lam, active, illuminant=False,
+                                reach=self.alpha_reach[0])[0]
+        av = (self.textures.eval(dr.gather(mi.UInt32, self.alpha_v, idx, active), uv, lam, active, illuminant=False,
+                                 reach=self.alpha_reach[1])[0]
               if self.anisotropic else au)
         return eta, au, av, self.variant_table.lane(idx, active)
 

@@ -33,10 +33,12 @@ class Diffuse(BSDFType):
 
     def build(self) -> None:
         self.reflectance = mi.UInt32([i["reflectance"] for i in self.instances])
+        self.reflectance_reach = tuple(i["reflectance"] for i in self.instances)
 
     def _albedo(self, ctx, idx, active):
         slot = dr.gather(mi.UInt32, self.reflectance, idx, active)
-        return self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active, illuminant=False)
+        return self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active, illuminant=False,
+                                  reach=self.reflectance_reach)
 
     @staticmethod
     def _eval(albedo, wi, wo):

@@ -262,9 +262,12 @@ class Hair(BSDFType):
 
     def build(self) -> None:
         ins = self.instances
-        table = lambda k: mi.UInt32([0 if i[k] is None else i[k] for i in ins])  # noqa: E731
+        slots = lambda k: [0 if i[k] is None else i[k] for i in ins]  # noqa: E731
+        table = lambda k: mi.UInt32(slots(k))  # noqa: E731
         self.beta_m, self.beta_n, self.alpha = table("beta_m"), table("beta_n"), table("alpha")
         self.sigma, self.eu, self.ph = table("sigma"), table("eu"), table("ph")
+        # The slots each parameter's lookup can reach (TextureSet.eval's reach).
+        self.reach = {k: tuple(slots(k)) for k in ("beta_m", "beta_n", "alpha", "sigma", "eu", "ph")}
         self.eta = mi.Float([i["eta"] for i in ins])
         self.scale = mi.Float([i["scale"] for i in ins])
         self.mode = mi.UInt32([i["mode"] for i in ins])
@@ -278,16 +281,17 @@ class Hair(BSDFType):
     def _fibre(self, ctx, idx, active) -> _Fibre:
         tex, uv, lam = self.textures, ctx.si.uv, ctx.wl.lambda_
 
-        def ev(table, on=active):
-            return tex.eval(dr.gather(mi.UInt32, table, idx, on), uv, lam, on, illuminant=False)
+        def ev(name, on=active):
+            return tex.eval(dr.gather(mi.UInt32, getattr(self, name), idx, on), uv, lam, on, illuminant=False,
+                            reach=self.reach[name])
 
         fb = _Fibre()
         # Numerical clamps of checked values: the derivative at a bound passes.
-        beta_m = clamp_keep_grad(ev(self.beta_m)[0], _BETA_MIN, 1.0)
-        beta_n = clamp_keep_grad(ev(self.beta_n)[0], _BETA_MIN, 1.0)
+        beta_m = clamp_keep_grad(ev("beta_m")[0], _BETA_MIN, 1.0)
+        beta_n = clamp_keep_grad(ev("beta_n")[0], _BETA_MIN, 1.0)
         fb.v = longitudinal_variances(beta_m)
         fb.s = logistic_scale(beta_n)
-        sin_a = dr.sin(ev(self.alpha)[0] * (dr.pi / 180.0))
+        sin_a = dr.sin(ev("alpha")[0] * (dr.pi / 180.0))
         cos_a = dr.safe_sqrt(1.0 - dr.square(sin_a))
         fb.sin2k, fb.cos2k = [sin_a], [cos_a]
         for _ in range(2):
@@ -299,17 +303,17 @@ class Hair(BSDFType):
         sigma_a = mi.Spectrum(0.0)
         if PIGMENT in self.modes:
             on = active if mode is None else active & (mode == PIGMENT)
-            ce = clamp_keep_grad(ev(self.eu, on)[0], 0.0)
-            cp = clamp_keep_grad(ev(self.ph, on)[0], 0.0)
+            ce = clamp_keep_grad(ev("eu", on)[0], 0.0)
+            cp = clamp_keep_grad(ev("ph", on)[0], 0.0)
             se, sp = (sigmoid_polynomial(mi.Array3f(*c), lam) for c in self.pigment_coeffs)
             sigma_a = dr.select(on, ce * se + cp * sp, sigma_a)
         if SIGMA_A in self.modes:
             on = active if mode is None else active & (mode == SIGMA_A)
-            sig = clamp_keep_grad(ev(self.sigma, on) * dr.gather(mi.Float, self.scale, idx, on), 0.0)
+            sig = clamp_keep_grad(ev("sigma", on) * dr.gather(mi.Float, self.scale, idx, on), 0.0)
             sigma_a = dr.select(on, sig, sigma_a)
         if REFLECTANCE in self.modes:
             on = active if mode is None else active & (mode == REFLECTANCE)
-            c = dr.clip(ev(self.sigma, on), 0.0, 1.0)
+            c = dr.clip(ev("sigma", on), 0.0, 1.0)
             sigma_a = dr.select(on, sigma_a_from_reflectance(c, beta_n), sigma_a)
         fb.sigma_a = sigma_a
         return fb

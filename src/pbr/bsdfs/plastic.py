@@ -53,6 +53,8 @@ class Plastic(BSDFType):
     def build(self) -> None:
         col = lambda k, t=mi.Float: t([i[k] for i in self.instances])  # noqa: E731
         self.diffuse, self.spec = col("diffuse", mi.UInt32), col("spec", mi.UInt32)
+        # The slots each texture's lookup can reach (TextureSet.eval's reach).
+        self.reach = {n: tuple(i[n] for i in self.instances) for n in ("diffuse", "spec")}
         self.eta, self.fdr_int, self.spec_weight = col("eta"), col("fdr_int"), col("spec_weight")
         self.nonlinear = col("nonlinear", mi.Bool)
         self.any_nonlinear = any(i["nonlinear"] for i in self.instances)
@@ -61,13 +63,15 @@ class Plastic(BSDFType):
         g = lambda a: dr.gather(type(a), a, idx, active)  # noqa: E731
         return g(self.eta), g(self.fdr_int), g(self.spec_weight)
 
-    def _tex(self, table, ctx, idx, active):
-        slot = dr.gather(mi.UInt32, table, idx, active)
-        return self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active, illuminant=False)
+    def _tex(self, name, ctx, idx, active):
+        """Texture ``name`` ('diffuse' or 'spec') at this hit."""
+        slot = dr.gather(mi.UInt32, getattr(self, name), idx, active)
+        return self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active, illuminant=False,
+                                  reach=self.reach[name])
 
     def _diffuse_term(self, ctx, idx, eta, fdr_int, f_i, f_o, active):
         """f_d * pi / cos: the diffuse albedo after coating losses and re-reflections."""
-        d = self._tex(self.diffuse, ctx, idx, active)
+        d = self._tex("diffuse", ctx, idx, active)
         denom = 1.0 - fdr_int
         if self.any_nonlinear:
             denom = dr.select(dr.gather(mi.Bool, self.nonlinear, idx, active), 1.0 - d * fdr_int, denom)
@@ -99,7 +103,7 @@ class Plastic(BSDFType):
         wo_d = square_to_cosine_hemisphere(u2)
         wo = dr.select(specular, reflect(wi), wo_d)
         f_o = fresnel_dielectric(wo_d.z, eta)[0]
-        w_spec = self._tex(self.spec, ctx, idx, ok & specular) * (f_i / p_spec)
+        w_spec = self._tex("spec", ctx, idx, ok & specular) * (f_i / p_spec)
         w_diff = self._diffuse_term(ctx, idx, eta, fdr_int, f_i, f_o, ok & ~specular) / (1.0 - p_spec)
         pdf = dr.select(specular, p_spec, (1.0 - p_spec) * cosine_hemisphere_pdf(wo_d))
         w = dr.select(specular, w_spec, w_diff)

@@ -151,14 +151,17 @@ class _PrincipledFamily(BSDFType):
 
     def build(self) -> None:
         self.slots = {}
+        self.reach = {}
         for name, _ in self._ALWAYS:
             self.slots[name] = mi.UInt32([i[name] for i in self.instances])
+            self.reach[name] = tuple(i[name] for i in self.instances)
         self.has = {}
         for name in self._OPTIONAL:
             s = [i[name] for i in self.instances]
             self.has[name] = any(x is not None for x in s)
             if self.has[name]:
                 self.slots[name] = (mi.UInt32([_NONE if x is None else x for x in s]), any(x is None for x in s))
+                self.reach[name] = tuple(x for x in s if x is not None)
         self.rates = {n: mi.Float([i[n] for i in self.instances]) for n in self._RATES}
 
     # -- parameter lookup ------------------------------------------------------------
@@ -171,7 +174,7 @@ class _PrincipledFamily(BSDFType):
         table, some_off = entry if isinstance(entry, tuple) else (entry, False)
         slot = dr.gather(mi.UInt32, table, idx, active)
         on = active & (slot != _NONE) if some_off else active
-        v = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, on, illuminant=False)
+        v = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, on, illuminant=False, reach=self.reach[name])
         if not spectral:
             v = v[0]
         return dr.select(slot != _NONE, v, 0.0) if some_off else v

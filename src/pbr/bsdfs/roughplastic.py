@@ -313,7 +313,7 @@ class RoughPlastic(Plastic):
         wi = ctx.si.wi
         ok = active & (wi.z > 0) & (wo.z > 0)
         g_val, g_pdf = self._glossy(wi, wo, eta, alpha, vid)
-        spec = self._tex(self.spec, ctx, idx, ok)
+        spec = self._tex("spec", ctx, idx, ok)
         t_o = lerp_table(self.table, offset, wo.z, ok)
         # Plastic's diffuse term with (1 - F) at both crossings replaced by T.
         diffuse = self._diffuse_term(ctx, idx, eta, r_int, 1.0 - t_i, 1.0 - t_o, ok) * (dr.inv_pi * wo.z)

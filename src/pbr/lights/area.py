@@ -171,6 +171,7 @@ class AreaLight(LightType):
         cat = {k: np.concatenate(v) for k, v in cols.items()}
         f32 = np.float32
         self.radiance = mi.UInt32(cat["radiance"].astype(np.uint32))
+        self.radiance_reach = tuple(int(x) for x in np.unique(cat["radiance"]))
         self.area = mi.Float(cat["area"].astype(f32))
         kind = cat["kind"]
         self.kinds = sorted(set(int(x) for x in np.unique(kind)))
@@ -206,7 +207,7 @@ class AreaLight(LightType):
     def L(self, idx, si, wl, active):
         active = active & (si.wi.z > 0)
         slot = dr.gather(mi.UInt32, self.radiance, idx, active)
-        return dr.select(active, self.textures.eval(slot, si.uv, wl.lambda_, active), 0.0)
+        return dr.select(active, self.textures.eval(slot, si.uv, wl.lambda_, active, reach=self.radiance_reach), 0.0)
 
     def _sample_planar(self, idx, u, active):
         """Uniform point on a triangle or parallelogram sub-light: (p, n, shading n, uv)."""
@@ -261,7 +262,7 @@ class AreaLight(LightType):
         active = active & (dr.dot(ns, wi) < 0) & (cos_g > 0) & (area > 0) & (dist2 > 0)
         pdf = dist2 / (cos_g * area)
         slot = dr.gather(mi.UInt32, self.radiance, idx, active)
-        L = self.textures.eval(slot, uv, wl.lambda_, active)
+        L = self.textures.eval(slot, uv, wl.lambda_, active, reach=self.radiance_reach)
         return LightSample(dr.select(active, L, 0.0), wi, dr.select(active, pdf, 0.0), p, mi.Bool(False))
 
     def pdf_Li(self, idx, ref_p, si, active):
@@ -286,7 +287,7 @@ class AreaLight(LightType):
         n = dr.select(dr.dot(ng, ns) < 0, -ng, ng)
         ok = active & (area > 0) & (local.z > 0)
         slot = dr.gather(mi.UInt32, self.radiance, idx, ok)
-        L = self.textures.eval(slot, uv, wl.lambda_, ok)
+        L = self.textures.eval(slot, uv, wl.lambda_, ok, reach=self.radiance_reach)
         return LeSample(o=p, d=d, L=dr.select(ok, L, 0.0), pdf_pos=dr.select(ok, dr.rcp(area), 0.0),
                         pdf_dir=dr.select(ok, cosine_hemisphere_pdf(local), 0.0), n=mi.Normal3f(n))
 

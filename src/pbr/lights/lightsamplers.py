@@ -70,8 +70,12 @@ def make_light_sampler(kind: str, powers, bounds=None):
     if kind not in LIGHT_SAMPLERS:
         raise ValueError(f"unknown light sampler {kind!r} (choose from {', '.join(LIGHT_SAMPLERS)})")
     powers = np.asarray(powers, dtype=np.float64).reshape(-1)
-    if kind != "bvh":
-        return LightSampler(kind, powers)
+    if kind != "bvh" or len(powers) == 1:
+        # One light: the BVH would choose it wherever its importance bound is positive,
+        # and elsewhere its contribution is 0 anyway; choosing it always is the same
+        # estimator without the per-vertex importance (Mitsuba's choice: 5-10% of the
+        # render time of one-light scenes, measured by benchmarks/profile_kernels.py).
+        return LightSampler("uniform" if kind == "bvh" else kind, powers)
     table = ensure_table(bounds, len(powers))
     # Scenes are rebuilt on every params.update(): reuse the tree while the bounds stay.
     # The key is the bounds' bytes themselves (exact; hashlib would load OpenSSL, 3.5 MiB).

@@ -370,6 +370,7 @@ class MediumSet:
         self.form = u32(m.form for m in ms)
         self.s1 = u32(m.s1 for m in ms)
         self.s2 = u32(m.s2 for m in ms)
+        self.s_reach = (tuple(int(m.s1) for m in ms), tuple(int(m.s2) for m in ms))
         self.g1 = u32(m.g1 for m in ms)
         self.g2 = u32(m.g2 for m in ms)
         self.scale = param_table([m.owner.params["scale"] for m in ms])
@@ -418,8 +419,10 @@ class MediumSet:
     def _factors(self, m, wl, active):
         """The constant spectra S1, S2 and the scale of medium ``m``."""
         uv = mi.Point2f(0.0)
-        s1 = self.textures.eval(dr.gather(mi.UInt32, self.s1, m, active), uv, wl.lambda_, active)
-        s2 = self.textures.eval(dr.gather(mi.UInt32, self.s2, m, active), uv, wl.lambda_, active)
+        s1 = self.textures.eval(dr.gather(mi.UInt32, self.s1, m, active), uv, wl.lambda_, active,
+                                reach=self.s_reach[0])
+        s2 = self.textures.eval(dr.gather(mi.UInt32, self.s2, m, active), uv, wl.lambda_, active,
+                                reach=self.s_reach[1])
         return s1, s2, dr.gather(mi.Float, self.scale, m, active)
 
     def _combine(self, m, x, y, scale, active):

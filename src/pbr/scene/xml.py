@@ -658,7 +658,7 @@ def _xml_tags():
             ("sampler", {"orthogonal"} | set(SAMPLERS)), ("rfilter", FILTERS),
             ("integrator", INTEGRATORS), ("spectrum", ("blackbody", "d65", "uniform")),
             ("texture", ("bitmap", "checkerboard", "scale", "mix", "mesh_attribute")),
-            ("medium", MEDIUM_TYPES), ("phase", PHASE_TYPES))
+            ("medium", MEDIUM_TYPES), ("phase", PHASE_TYPES), ("volume", ("gridvolume", "constvolume")))
 
 
 def to_xml(d: dict, base_dir: str | None = None) -> str:

@@ -8,9 +8,17 @@ depth (the deepest nesting in the scene), where each level evaluates at most thr
 children, masked per lane: a scene without composites traces exactly the leaf code.
 Bitmap texels are upsampled per texel and the spectra of the 4 nearest texels are
 interpolated, as in Mitsuba's spectral variants.
+
+A caller that knows which slots a lookup can reach (a BSDF parameter: its instances'
+slots) passes them as ``reach``: the kernel then holds only the kinds, spectrum bases
+(sigmoid coefficients, tabulated spectra, D65) and combinators those slots use, not every
+one the scene has (the materials gallery evaluated the tabulated-spectrum code of its
+metals for every diffuse albedo).
 """
 
 from __future__ import annotations
+
+from types import SimpleNamespace
 
 import drjit as dr
 import mitsuba as mi
@@ -44,6 +52,7 @@ class TextureSet:
         self.mesh_uses: list = []       # triangles (set by meshattr.bind)
         self.mesh_geometry: dict = {}
         self.tables = TextureTables()
+        self._features: dict = {}       # reach -> what its evaluation must trace
 
     # -- building -------------------------------------------------------------------
     def add(self, tex) -> int:
@@ -182,17 +191,6 @@ class TextureSet:
             if OP_CHECKER in self.ops:
                 T.composites.to_uv = _uv_rows(cp)
             self.depth = max(self.depth_of(s) for s in self.composites)
-            # Per level d of the descent: the operations of composites of depth <= d and
-            # how deep each child role (x, y, m) nests below them, so that a kernel only
-            # descends where the scene's trees do (one deep chain costs one extra leaf
-            # evaluation per level, not three).
-            self._levels = {}
-            for d in range(1, self.depth + 1):
-                cs = [self.items[s] for s in self.composites if self.depth_of(s) <= d]
-                role = lambda r, ops: max([self.depth_of(getattr(c, r)) for c in cs if c.op in ops],  # noqa: E731
-                                          default=0)
-                self._levels[d] = ({c.op for c in cs}, role("x", (OP_SCALE, OP_MIX, OP_CHECKER)),
-                                   role("y", (OP_MIX, OP_CHECKER)), role("m", (OP_SCALE, OP_MIX)))
         T.mesh_attributes = meshattr.build_tables(self, index)
         if self.procedurals:
             items = [self.items[s] for s in self.procedurals]
@@ -209,6 +207,59 @@ class TextureSet:
         self.has_table = any(c.base == BASE_TABLE for c in consts)
         self.has_d65 = any(c.form == "illuminant" for c in consts) or any(
             self.items[s].form == "illuminant" for s in self.bitmaps)
+        self._features = {}
+
+    def features(self, reach=None) -> SimpleNamespace:
+        """What evaluating a slot among ``reach`` (None: any slot) must trace: the slots
+        it reaches through combinators and checkerboards, by kind, the leaf kinds, the
+        constants' spectrum bases, whether a D65 factor or bilinear filtering occurs, and
+        the combinator levels (see :meth:`_eval_node`). Cached per ``reach``."""
+        key = frozenset(int(r) for r in reach) if reach else None     # () as None: no lane can be active
+        f = self._features.get(key)
+        if f is not None:
+            return f
+        if key is None:
+            slots = set(range(len(self.items)))
+        else:
+            slots, todo = set(), list(key)
+            while todo:
+                s = todo.pop()
+                if s in slots:
+                    continue
+                slots.add(s)
+                t = self.items[s]
+                if isinstance(t, Composite):
+                    todo.extend(k for k in (t.x, t.y, t.m) if k is not None)
+                elif isinstance(t, Checkerboard):
+                    todo.extend((t.color0, t.color1))
+        by = {k: sorted(s for s in slots if self.kind_of(s) == k)
+              for k in (CONSTANT, CHECKERBOARD, BITMAP, COMPOSITE, MESH_ATTRIBUTE, PROCEDURAL, MIPMAP)}
+        consts = [self.items[s] for s in by[CONSTANT]]
+        composites = by[COMPOSITE]
+        depth = max((self.depth_of(s) for s in composites), default=0)
+        # Per level d of the descent: the operations of composites of depth <= d and how
+        # deep each child role (x, y, m) nests below them, so that a kernel only descends
+        # where the scene's trees do (one deep chain costs one extra leaf evaluation per
+        # level, not three).
+        levels = {}
+        for d in range(1, depth + 1):
+            cs = [self.items[s] for s in composites if self.depth_of(s) <= d]
+            role = lambda r, ops: max([self.depth_of(getattr(c, r)) for c in cs if c.op in ops],  # noqa: E731
+                                      default=0)
+            levels[d] = ({c.op for c in cs}, role("x", (OP_SCALE, OP_MIX, OP_CHECKER)),
+                         role("y", (OP_MIX, OP_CHECKER)), role("m", (OP_SCALE, OP_MIX)))
+        bases = {c.base for c in consts}
+        f = SimpleNamespace(
+            leaf_kinds={self.kind_of(s) for s in slots if self.kind_of(s) != COMPOSITE},
+            constants=by[CONSTANT], checkers=by[CHECKERBOARD], bitmaps=by[BITMAP], composites=composites,
+            mesh_attrs=by[MESH_ATTRIBUTE], procedurals=by[PROCEDURAL], mipmaps=by[MIPMAP], n_leaves=len(slots) - len(composites),
+            bases=bases, has_sigmoid=BASE_SIGMOID in bases, has_table=BASE_TABLE in bases,
+            has_d65=any(c.form == "illuminant" for c in consts) or any(
+                self.items[s].form == "illuminant" for s in by[BITMAP]),
+            bilinear=any(self.items[s].filter_type == "bilinear" for s in by[BITMAP]),
+            depth=depth, levels=levels)
+        self._features[key] = f
+        return f
 
     def _value_tables(self):
         """The tables that hold parameter values, built differentiably from them: 4 floats
@@ -268,24 +319,25 @@ class TextureSet:
         m = [dr.gather(mi.Float, a, i) for a in M]
         return mi.Point2f(m[0] * uv[0] + m[1] * uv[1] + m[2], m[3] * uv[0] + m[4] * uv[1] + m[5])
 
-    def _eval_constant(self, ci, lam, active, illuminant=True):
+    def _eval_constant(self, ci, lam, active, illuminant=True, f=None):
+        f = f or self.features()
         T = self.tables.constants
         v = mi.Spectrum(1.0)
         t = dr.gather(mi.Array4f, T.packed, ci, active)
-        if self.has_sigmoid:
+        if f.has_sigmoid:
             c = mi.Array3f(t[0], t[1], t[2])
-            if self.bases == {BASE_SIGMOID}:
+            if f.bases == {BASE_SIGMOID}:
                 v = spec.sigmoid_polynomial(c, lam)
             else:
                 base = dr.gather(mi.UInt32, T.base, ci, active)
                 v = dr.select(base == BASE_SIGMOID, spec.sigmoid_polynomial(c, lam), v)
-        if self.has_table:
+        if f.has_table:
             base = dr.gather(mi.UInt32, T.base, ci, active)
             off = dr.gather(mi.UInt32, T.tab_offset, ci, active)
             tab = mi.Spectrum([self._lerp_1nm(T.tab, off, lam[k], active & (base == BASE_TABLE))
                                for k in range(spec.N_WAVELENGTHS)])
             v = dr.select(base == BASE_TABLE, tab, v)
-        if illuminant and self.has_d65 and self.constants:
+        if illuminant and f.has_d65 and f.constants:
             v = dr.select(dr.gather(mi.Bool, T.d65, ci, active), v * spec.d65(lam), v)
         return v * t[3]
 
@@ -320,7 +372,8 @@ class TextureSet:
 
         return index, w, bil, res, A
 
-    def _eval_bitmap(self, bi, uv, lam, active, illuminant=True):
+    def _eval_bitmap(self, bi, uv, lam, active, illuminant=True, f=None):
+        f = f or self.features()
         T = self.tables.bitmaps
         index, w1, bil, _, _ = self._bitmap_lookup(bi, uv, active)
 
@@ -330,12 +383,12 @@ class TextureSet:
             return spec.sigmoid_polynomial(mi.Array3f(t[0], t[1], t[2]), lam) * t[3]
 
         v = texel(0, 0)
-        if any(self.items[s].filter_type == "bilinear" for s in self.bitmaps):
+        if f.bilinear:
             v10, v01, v11 = texel(1, 0), texel(0, 1), texel(1, 1)
             v0 = dr.fma(w1.x, v10 - v, v)
             v1 = dr.fma(w1.x, v11 - v01, v01)
             v = dr.select(bil, dr.fma(w1.y, v1 - v0, v0), v)
-        if illuminant and self.has_d65:
+        if illuminant and f.has_d65:
             v = dr.select(dr.gather(mi.Bool, T.d65, bi, active), v * spec.d65(lam), v)
         return v
 
@@ -357,38 +410,41 @@ class TextureSet:
         # Chain rule through to_uv (st = A uv + b).
         return v, A[0] * gs + A[3] * gt, A[1] * gs + A[4] * gt
 
-    def eval(self, slot, uv, lam: mi.Spectrum, active=True, illuminant=True) -> mi.Spectrum:
+    def eval(self, slot, uv, lam: mi.Spectrum, active=True, illuminant=True, reach=None) -> mi.Spectrum:
         """Spectrum of texture ``slot`` at ``uv``: surface coordinates, or the surface
         interaction (BSDFs pass ``ctx.si``: ``mesh_attribute`` textures need the hit; they
         are 0 at plain coordinates). Callers that can only reach non-illuminant textures
-        (reflectances) pass ``illuminant=False`` to keep the D65 lookup out of their kernels."""
+        (reflectances) pass ``illuminant=False`` to keep the D65 lookup out of their kernels.
+        ``reach``: the slots ``slot`` can hold (Python ints), or None for any: only what
+        those slots use is traced (:meth:`features`)."""
         slot = mi.UInt32(slot)
         si = uv if isinstance(uv, mi.SurfaceInteraction3f) else None
         uv = si.uv if si is not None else uv
-        if not self.composites:
-            return self._eval_leaf(slot, uv, lam, active, illuminant, si)
-        return self._eval_node(slot, uv, lam, mi.Bool(active), illuminant, self.depth, si)
+        f = self.features(reach)
+        if not f.composites:
+            return self._eval_leaf(slot, uv, lam, active, illuminant, si, f)
+        return self._eval_node(slot, uv, lam, mi.Bool(active), illuminant, f.depth, si, f)
 
-    def _eval_node(self, slot, uv, lam, active, illuminant, depth, si=None):
+    def _eval_node(self, slot, uv, lam, active, illuminant, depth, si=None, f=None):
         """Evaluate ``slot`` whose combinator nesting is at most ``depth`` levels: at each
         level a composite lane evaluates its children one level down, any other lane
         passes its own (leaf) slot down as the first child."""
         if depth == 0:
-            return self._eval_leaf(slot, uv, lam, active, illuminant, si)
+            return self._eval_leaf(slot, uv, lam, active, illuminant, si, f)
         T = self.tables.composites
-        ops, dx, dy, dm = self._levels[depth]
+        ops, dx, dy, dm = f.levels[depth]
         comp = active & (dr.gather(mi.UInt32, self.tables.slot_kind, slot, active) == COMPOSITE)
         ni = dr.gather(mi.UInt32, self.tables.slot_index, slot, comp)
         op = dr.gather(mi.UInt32, T.op, ni, comp) if len(ops) > 1 else mi.UInt32(next(iter(ops)))
         x_slot = dr.select(comp, dr.gather(mi.UInt32, T.x, ni, comp), slot)
-        x = self._eval_node(x_slot, uv, lam, active, illuminant, dx, si)
+        x = self._eval_node(x_slot, uv, lam, active, illuminant, dx, si, f)
         result = x
         if ops & {OP_SCALE, OP_MIX}:
             uses_m = comp & (op != OP_CHECKER)
-            m = self._eval_node(dr.gather(mi.UInt32, T.m, ni, uses_m), uv, lam, uses_m, illuminant, dm, si)
+            m = self._eval_node(dr.gather(mi.UInt32, T.m, ni, uses_m), uv, lam, uses_m, illuminant, dm, si, f)
         if ops & {OP_MIX, OP_CHECKER}:
             uses_y = comp & (op != OP_SCALE)
-            y = self._eval_node(dr.gather(mi.UInt32, T.y, ni, uses_y), uv, lam, uses_y, illuminant, dy, si)
+            y = self._eval_node(dr.gather(mi.UInt32, T.y, ni, uses_y), uv, lam, uses_y, illuminant, dy, si, f)
         if OP_SCALE in ops:
             result = dr.select(comp & (op == OP_SCALE), x * m, result)
         if OP_MIX in ops:
@@ -401,21 +457,22 @@ class TextureSet:
             result = dr.select(is_ck & second, y, result)
         return result
 
-    def _eval_leaf(self, slot, uv, lam, active, illuminant, si=None):
+    def _eval_leaf(self, slot, uv, lam, active, illuminant, si=None, f=None):
         """A constant, checkerboard (of constants), bitmap or mesh-attribute slot."""
+        f = f or self.features()
         T = self.tables
-        others = self.checkers or self.bitmaps or self.mesh_attrs or self.procedurals or self.mipmaps
-        if len(self.items) == 1 or not others:
-            kind = mi.UInt32(self.kind_of(0)) if len(self.items) == 1 else mi.UInt32(CONSTANT)
+        if len(f.leaf_kinds) == 1:      # the kind of every lane (inactive lanes do not matter)
+            kind = mi.UInt32(next(iter(f.leaf_kinds)))
         else:
             kind = dr.gather(mi.UInt32, T.slot_kind, slot, active)
-        # With constants only, slots are constant-table indices already.
-        only_constants = not (others or self.composites)
+        # With constants only (in the whole set), slots are constant-table indices already.
+        only_constants = not (self.checkers or self.bitmaps or self.composites or self.mesh_attrs
+                                or self.procedurals or self.mipmaps)
         idx = slot if only_constants else dr.gather(mi.UInt32, T.slot_index, slot, active)
         result = mi.Spectrum(0.0)
-        if self.constants:
+        if f.constants:
             ci = idx
-            if self.checkers:
+            if f.checkers:
                 is_ck = active & (kind == CHECKERBOARD)
                 st = self._apply_uv(T.checkers.to_uv, uv, idx)
                 frac = st - dr.floor(st)
@@ -424,28 +481,28 @@ class TextureSet:
                 c1 = dr.gather(mi.UInt32, T.checkers.color1, idx, is_ck)
                 ci = dr.select(is_ck, dr.select(same, c0, c1), idx)
             on = active & (kind != BITMAP)
-            for k, lst in ((MESH_ATTRIBUTE, self.mesh_attrs), (PROCEDURAL, self.procedurals), (MIPMAP, self.mipmaps)):
+            for k, lst in ((MESH_ATTRIBUTE, f.mesh_attrs), (PROCEDURAL, f.procedurals), (MIPMAP, f.mipmaps)):
                 if lst:
                     on &= kind != k
-            result = self._eval_constant(ci, lam, on, illuminant)
-        if self.bitmaps:
+            result = self._eval_constant(ci, lam, on, illuminant, f)
+        if f.bitmaps:
             is_bm = active & (kind == BITMAP)
-            if len(self.bitmaps) < len(self.items) and dispatch.branching():
+            if len(f.bitmaps) < f.n_leaves and dispatch.branching():
                 # A symbolic conditional: vector packets with no bitmap lane skip the
                 # lookup (four texel spectra), instead of computing and discarding it.
                 result = dr.if_stmt(
                     (idx, uv, lam, is_bm, result), is_bm,
-                    lambda i, u, l, m, r: mi.Spectrum(self._eval_bitmap(i, u, l, m, illuminant)),
+                    lambda i, u, l, m, r: mi.Spectrum(self._eval_bitmap(i, u, l, m, illuminant, f)),
                     lambda i, u, l, m, r: r, label="bitmap texture")
             else:
-                result = dr.select(is_bm, self._eval_bitmap(idx, uv, lam, is_bm, illuminant), result)
-        if self.procedurals:
+                result = dr.select(is_bm, self._eval_bitmap(idx, uv, lam, is_bm, illuminant, f), result)
+        if f.procedurals:
             is_pr = active & (kind == PROCEDURAL)
             result = dr.select(is_pr, procedural.evaluate(self, idx, uv, si, lam, is_pr), result)
-        if self.mipmaps:
+        if f.mipmaps:
             is_mm = active & (kind == MIPMAP)
             result = dr.select(is_mm, mipmap.evaluate(self, idx, uv, si, lam, is_mm, illuminant), result)
-        if self.mesh_data and si is not None:   # elsewhere mesh attributes are 0
+        if f.mesh_attrs and self.mesh_data and si is not None:   # elsewhere mesh attributes are 0
             is_ma = active & (kind == MESH_ATTRIBUTE)
             result = dr.select(is_ma, meshattr.evaluate(self, idx, si, lam, is_ma), result)
         return result
