@@ -44,7 +44,8 @@ from ..cameras import SENSORS
 from ..films import FILMS
 from ..filters import FILTERS
 from ..integrators import INTEGRATORS
-from ..spectrum import CIE_Y_INTEGRAL, LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, blackbody, cie_tables_np
+from ..lights import LIGHT_TYPES
+from ..spectrum import CIE_Y_INTEGRAL, LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, blackbody, cie_tables_np, xyz_to_srgb
 from ..textures import TEXTURE_TYPES
 from .pbrt_tokens import Directive, Param, read_directives, resolve
 from .xml import XMLError
@@ -123,6 +124,24 @@ def luminance_of(values: np.ndarray, lam: np.ndarray) -> float:
 def _blackbody_luminance(t: float) -> float:
     lam = np.arange(LAMBDA_MIN, LAMBDA_MAX + 1.0)
     return luminance_of(blackbody(lam, t), lam)
+
+
+def _spectrum_srgb(v) -> np.ndarray:
+    """Linear sRGB of a pbr spectrum value as pbrt-v4's ``SpectrumToXYZ`` + sRGB gives it
+    (a ``blackbody`` normalised to a peak of 1, as pbrt-v4's ``BlackbodySpectrum``)."""
+    if isinstance(v, float):
+        return np.full(3, v)
+    if v.get("type") == "rgb":
+        return np.asarray(v["value"], dtype=np.float64)
+    xyz, _ = cie_tables_np()
+    grid = LAMBDA_MIN + 5.0 * np.arange(len(xyz))
+    if v.get("type") == "blackbody":
+        s = blackbody(grid, v["temperature"]) / _blackbody_peak(v["temperature"])
+    else:
+        pr = np.asarray(v["value"], dtype=np.float64)
+        s = np.interp(grid, pr[:, 0], pr[:, 1], left=0.0, right=0.0)
+    XYZ = np.trapezoid(s[:, None] * xyz, grid, axis=0) / CIE_Y_INTEGRAL
+    return xyz_to_srgb(XYZ)
 
 
 def _blackbody_peak(t: float) -> float:
@@ -1385,8 +1404,7 @@ class PBRTScene:
             fname = p.string("filename")
             sc = p.one("scale", "float", 1.0)
             if p.has("portal"):
-                p._get("portal", ("point3",))
-                self.unsupported(p.d, "infinite light 'portal' (pbr's portalenvmap takes lat-long maps)")
+                return self.portal_infinite(p, fname, sc, m)
             if fname is not None:
                 return self.image_infinite(p, resolve(fname, self.base), sc, m)
             l, lum = self.emission(p, "L")
@@ -1397,6 +1415,35 @@ class PBRTScene:
                 return {"type": "constant", "radiance": {"type": "rgb", "value": [v * sc / lum for v in l["value"]]}}
             return {"type": "constant", "radiance": {"type": "scale", "tex": l, "scale": sc / lum}}
         raise p.error(None, f"unknown light {t!r} (pbrt-v4's: point, spot, distant, goniometric, projection, infinite)")
+
+    def portal_infinite(self, p, fname, sc, m):
+        """pbrt-v4's portal light (``PortalImageInfiniteLight``): pbr's ``portalenvmap``.
+        The portal's 4 points are in world space (pbrt-v4 ignores the CTM for them); the
+        image, or ``L`` converted to sRGB as pbrt-v4 does (without dividing by L's
+        luminance: only by the illuminant's), is rotated by the CTM as for ``infinite``."""
+        pts = p.array("portal", "point3", 3)
+        if pts.shape != (4, 3):
+            raise p.error("portal", f"expected 4 points, got {len(pts)}")
+        if not self.pbr_plugin(LIGHT_TYPES, "portalenvmap"):
+            self.unsupported(p.d, "infinite light 'portal' (Mitsuba 3 has no portal light): "
+                                  "the environment without the portal is used")
+        if p.one("illuminance", "float", -1.0) > 0:
+            self.unsupported(p.d, "infinite light 'illuminance' with a portal")
+        if fname is not None:
+            if p.has("L"):
+                raise p.error("L", "give either \"L\" or \"filename\"")
+            out = self.image_infinite(p, resolve(fname, self.base), sc, m)
+        else:
+            l, _ = self.emission(p, "L")
+            rgb = np.maximum(_spectrum_srgb(l), 0.0)
+            frame = np.array([[1, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]], dtype=np.float64)
+            out = {"type": "envmap", "data": np.broadcast_to(rgb.astype(np.float32), (2, 4, 3)).copy(),
+                   "scale": sc, "to_world": _mi_transform(m @ frame)}
+        if out["type"] != "envmap" or not self.pbr_plugin(LIGHT_TYPES, "portalenvmap"):
+            return out
+        out["type"] = "portalenvmap"
+        out["portal"] = pts.tolist()
+        return out
 
     def image_infinite(self, p, fname, sc, m):
         """pbrt-v4's image infinite light: an equal-area octahedral square image, resampled
