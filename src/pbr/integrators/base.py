@@ -291,7 +291,7 @@ class SamplingIntegrator:
                     if ray_weight is not None:
                         L = L * ray_weight
                     extra = [*film_channels(scene, cam, rng, ray, wl, L, inside), *extra]
-                    xyz = clamp_sample(cam.film, spec.to_xyz(L, wl))
+                    xyz = clamp_sample(cam.film, cam.film.to_xyz(L, wl))
                     xyz, *extra = self.counter().replace([xyz * weight, *extra], inside)
                     extra = [c * weight for c in extra]
                     s = _pixel_sums([*xyz, weight, *extra], w * h, per_pass)

@@ -41,7 +41,7 @@ import numpy as np
 
 from .. import backend
 from ..cameras import SENSORS
-from ..films import FILMS
+from ..films import FILMS, camera_sensors
 from ..filters import FILTERS
 from ..integrators import INTEGRATORS
 from ..lights import LIGHT_TYPES
@@ -1565,17 +1565,9 @@ class PBRTScene:
                 if q.name in ("filename", "exposuretime", "xresolution", "yresolution"):
                     q.used = True
                     continue
-                if q.name == "sensor" and sensor != "cie1931":
-                    q.used = True
-                    # pbrt-v4 white-balances a camera sensor to 6500 K unless told otherwise.
-                    self.unsupported(self.film, f"film sensor {sensor!r} (pbrt-v4's measured camera response "
-                                                "curves; pbr has only 'cie1931'): 'cie1931' with white balance "
-                                                f"{wb or 6500:g} K is used")
-                    film["whitebalance"] = float(wb or 6500)
-                    continue
-                if q.name == "whitebalance" and "whitebalance" in film:
-                    q.used = True
-                    continue
+                if q.name == "sensor" and sensor not in camera_sensors() and sensor != "cie1931":
+                    raise f.error("sensor", f"unknown sensor {sensor!r} (pbrt-v4's: cie1931, "
+                                            f"{', '.join(camera_sensors())})")
                 q.used = True
                 film[q.name] = list(q.values) if len(q.values) != 1 else (
                     float(q.values[0]) if q.type == "float" else q.values[0])
