@@ -45,6 +45,7 @@ from ..films import FILMS, camera_sensors
 from ..filters import FILTERS
 from ..integrators import INTEGRATORS
 from ..lights import LIGHT_TYPES
+from ..media.mediumset import MEDIUM_TYPES
 from ..spectrum import CIE_Y_INTEGRAL, LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, blackbody, cie_tables_np, xyz_to_srgb
 from ..textures import TEXTURE_TYPES
 from .pbrt_tokens import Directive, Param, read_directives, resolve
@@ -1326,6 +1327,11 @@ class PBRTScene:
             if "Le" in out:
                 out["Lescale"] = p.one("Lescale", "float", 1.0)
             return out
+        if t == "cloud" and self.pbr_plugin(MEDIUM_TYPES, "cloud"):
+            common.pop("Le", None), common.pop("Lescale", None)    # pbrt-v4's cloud does not emit
+            return {"type": "cloud", "p0": list(p0), "p1": list(p1), "to_world": _mi_transform(m),
+                    "density": p.one("density", "float", 1.0), "wispiness": p.one("wispiness", "float", 1.0),
+                    "frequency": p.one("frequency", "float", 5.0), **common}
         if t in ("cloud", "nanovdb"):
             self.unsupported(p.d, f"medium {t!r} ({'procedural clouds' if t == 'cloud' else 'NanoVDB files'}): "
                                   "a homogeneous medium of its sigma_a/sigma_s is used")
