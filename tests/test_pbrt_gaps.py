@@ -246,3 +246,88 @@ def test_cloud_medium_transmittance(tmp_path):
     sigma = np.sqrt(want * (1 - want) / 4096) + 1e-3
     assert np.all(np.abs(lum - want) < 4.5 * sigma), np.abs(lum - want) / sigma
     assert abs((lum - want).mean()) < 3 * np.sqrt((sigma ** 2).sum()) / 64
+
+
+# -- two-sided and image area lights ----------------------------------------------------------
+
+AREA = """
+LookAt 0 0 {z}  0 0 0  0 1 0
+Camera "perspective" "float fov" 30
+Film "rgb" "integer xresolution" 16 "integer yresolution" 16
+PixelFilter "box"
+Sampler "independent" "integer pixelsamples" 256
+Integrator "path" "integer maxdepth" 1
+WorldBegin
+AreaLightSource "diffuse" {light}
+Shape "trianglemesh" "point3 P" [-1 -1 0  1 -1 0  1 1 0  -1 1 0] "integer indices" [0 1 2 0 2 3]
+    "point2 uv" [0 0  1 0  1 1  0 1]
+"""
+
+
+def test_two_sided_area_light(tmp_path):
+    """The quad's normal is +z: seen from -z a one-sided light is black, a two-sided one
+    shows L on both sides; with 'power' P each of the quad's two triangles (area 2) gets P
+    (pbrt-v4: one light per triangle), radiance P / (2 pi 2) when two-sided (k_e doubles)."""
+    def centre(z, light, name):
+        img = render(write(tmp_path, AREA.format(z=z, light=light), name))
+        return img[6:10, 6:10].mean(axis=(0, 1))
+    one_front = centre(5, '"rgb L" [1 2 3]', "a.pbrt")
+    one_back = centre(-5, '"rgb L" [1 2 3]', "b.pbrt")
+    two_back = centre(-5, '"rgb L" [1 2 3] "bool twosided" true', "c.pbrt")
+    np.testing.assert_allclose(one_front, [1, 2, 3], rtol=0.03)
+    assert one_back.max() == 0.0
+    np.testing.assert_allclose(two_back, [1, 2, 3], rtol=0.03)
+    p = centre(-5, '"bool twosided" true "float power" 100', "d.pbrt")
+    np.testing.assert_allclose(p, 100 / (2 * math.pi * 2), rtol=0.02)
+    d = to_dict(str(tmp_path / "c.pbrt"))
+    assert [v["emitter"]["twosided"] for v in d.values() if isinstance(v, dict) and "emitter" in v] == [True]
+
+
+@pytest.mark.parametrize("integrator", ["path", "lightpath", "bdpt"])
+def test_two_sided_area_light_illuminates_both_sides(tmp_path, integrator):
+    """A small disk light above a diffuse floor, its normal pointing up (away from the
+    floor): one-sided it leaves the floor black, two-sided it lights the floor as a
+    one-sided disk facing down does (next-event estimation and the light BVH take both
+    sides; pixels away from the disk); also for the light tracers (sample_Le: half the
+    rays leave the back)."""
+    scene = """
+LookAt 0 0 6  0 0 0  0 1 0
+Camera "perspective" "float fov" 20
+Film "rgb" "integer xresolution" 8 "integer yresolution" 8
+PixelFilter "box"
+Sampler "independent" "integer pixelsamples" {spp}
+Integrator "{integ}" "integer maxdepth" 1
+WorldBegin
+AttributeBegin
+  Translate 0 0 1
+  {rev}
+  AreaLightSource "diffuse" "rgb L" [1 1 1] {two}
+  Shape "disk" "float radius" 0.3
+AttributeEnd
+Shape "trianglemesh" "point3 P" [-3 -3 0  3 -3 0  3 3 0  -3 3 0] "integer indices" [0 1 2 0 2 3]
+"""
+    c = np.arange(8) - 3.5
+    far = np.hypot(*np.meshgrid(c, c)) > 2.6
+    spp = 256 if integrator == "path" else 2048
+    two = render(write(tmp_path, scene.format(rev="", two='"bool twosided" true', integ=integrator, spp=spp), "t.pbrt"))[far]
+    down = render(write(tmp_path, scene.format(rev="ReverseOrientation", two="", integ=integrator, spp=spp), "d.pbrt"))[far]
+    up = render(write(tmp_path, scene.format(rev="", two="", integ=integrator, spp=spp), "u.pbrt"))[far]
+    assert down.mean() > 0.01 and up.max() == 0.0
+    assert two.mean() == pytest.approx(down.mean(), rel=0.03)
+
+
+def test_image_area_light(tmp_path):
+    """pbrt-v4 looks an area light's image up at (u, 1 - v): on a quad whose v grows upward,
+    the image's first rows show at the top; 'scale' multiplies it."""
+    import mitsuba as mi
+    img = np.zeros((8, 8, 3), np.float32)
+    img[:4] = [1.0, 0.0, 0.0]
+    img[4:] = [0.0, 0.5, 0.0]
+    mi.Bitmap(img).write(str(tmp_path / "e.exr"))
+    path = write(tmp_path, AREA.format(z=5, light='"string filename" "e.exr" "float scale" 2'))
+    out = render(path)
+    top, bottom = out[4:7, 6:10].mean(axis=(0, 1)), out[9:12, 6:10].mean(axis=(0, 1))
+    np.testing.assert_allclose(top, [2, 0, 0], atol=0.08)
+    np.testing.assert_allclose(bottom, [0, 1, 0], atol=0.05)
+    with pytest.raises(XMLError, match="give either"):
+        to_dict(write(tmp_path, AREA.format(z=5, light='"string filename" "e.exr" "rgb L" [1 1 1]'), "x.pbrt"))

@@ -145,6 +145,19 @@ def _spectrum_srgb(v) -> np.ndarray:
     return xyz_to_srgb(XYZ)
 
 
+def _mean_image_luminance(path: str, p) -> float:
+    """The mean luminance of an image's pixels (pbrt-v4's k_e factor of an image area
+    light given 'power')."""
+    from ..image import read_image
+    try:
+        img = np.asarray(read_image(path), dtype=np.float64)
+    except Exception as e:
+        raise p.error("filename", f"cannot read image {path!r}: {e}") from None
+    if img.ndim == 2:
+        img = img[..., None].repeat(3, axis=2)
+    return float(np.mean(img[..., :3] @ [0.2126, 0.7152, 0.0722]))
+
+
 def _blackbody_peak(t: float) -> float:
     """pbrt-v4's BlackbodySpectrum normalisation: Planck's law at its peak (Wien)."""
     return float(blackbody(np.array([2.8977721e-3 / t * 1e9]), t)[0])
@@ -1477,11 +1490,25 @@ class PBRTScene:
 
     def area_light(self, p: _Params, shape: dict, sd: Directive) -> dict:
         l, lum = self.emission(p, "L")
+        two = p.bool("twosided", False)
+        extra = {}
+        if two and self.pbr_plugin(LIGHT_TYPES, "area") and not self.mitsuba:
+            extra["twosided"] = True
+        elif two:
+            self.unsupported(p.d, "two-sided area lights in a dict for Mitsuba 3 (its area emitters emit from the "
+                                  "front only): the front is used")
+        image = None
         if p.has("filename"):
-            self.unsupported(p.d, "area light 'filename' (an image on the emitter): L is used")
-            p.p["filename"].used = True
-        if p.bool("twosided", False):
-            self.unsupported(p.d, "two-sided area lights (pbr's area emitters emit from the front only)")
+            if p.has("L"):
+                raise p.error("filename", "give either \"L\" or \"filename\" (pbrt-v4)")
+            fname = resolve(p.string("filename"), self.base)
+            if self.mitsuba:
+                self.unsupported(p.d, "area light 'filename' in a dict for Mitsuba 3: L is used")
+            elif not os.path.exists(fname):
+                self.missing(p.d.where, p.d.name, os.path.basename(fname), fname)
+            else:
+                # pbrt-v4 looks the image up bilinearly at (u, 1 - v): pbr's imagemap convention.
+                image = {"type": "imagemap", "filename": fname, "filter": "bilinear", "wrap": "clamp"}
         sc = p.one("scale", "float", 1.0) / lum
         power = p.one("power", "float", -1.0)
         if power > 0:
@@ -1500,13 +1527,18 @@ class PBRTScene:
                 raise p.error("power", f"the area of this {shape['type']!r} shape is unknown")
             if not area > 0:
                 raise p.error("power", "the emitting shape has no area")
-            k_e = math.pi * area * (2 if p.bool("twosided", False) else 1)
+            k_e = math.pi * area * (2 if two else 1)
+            if image is not None:
+                k_e *= _mean_image_luminance(image["filename"], p)
             sc *= power / k_e
+        if image is not None:
+            return {"type": "area", "radiance": image if sc == 1.0 else {"type": "scale", "tex": image, "scale": sc},
+                    **extra}
         if isinstance(l, float):
-            return {"type": "area", "radiance": l * sc}
+            return {"type": "area", "radiance": l * sc, **extra}
         if l.get("type") == "rgb":
-            return {"type": "area", "radiance": {"type": "rgb", "value": [v * sc for v in l["value"]]}}
-        return {"type": "area", "radiance": {"type": "scale", "tex": l, "scale": sc}}
+            return {"type": "area", "radiance": {"type": "rgb", "value": [v * sc for v in l["value"]]}, **extra}
+        return {"type": "area", "radiance": {"type": "scale", "tex": l, "scale": sc}, **extra}
 
     # -- camera, film, sampler, integrator ------------------------------------------------------------------------
     def finish(self) -> None:
