@@ -236,7 +236,8 @@ class RGBFilm(HDRFilm):
     XYZ matching ('cie1931') times the imaging ratio exposure time * iso / 100 (the
     exposure time is the camera's shutter interval), optionally white balanced (von Kries,
     Bradford) from CIE daylight at ``whitebalance`` kelvin to sRGB's D65 white; each
-    sample's RGB is scaled down to at most ``maxcomponentvalue``. Nested: a filter.
+    sample's sensor values (XYZ, or a camera's RGB) times the imaging ratio are scaled
+    down to at most ``maxcomponentvalue`` (pbrt-v4's clamp). Nested: a filter.
 
     =================  =========  ==========  ================================================
     name               type       default     meaning
@@ -321,7 +322,8 @@ class RGBFilm(HDRFilm):
         self.set_exposure(1.0)
 
     def set_exposure(self, seconds: float) -> None:
-        m = self.white * (seconds * self.iso / 100.0)
+        self.imaging_ratio = seconds * self.iso / 100.0
+        m = self.white * self.imaging_ratio
         self.xyz_matrix = None if np.allclose(m, np.eye(3), atol=0.0, rtol=0.0) and self.curves is None else m
 
     def to_xyz(self, L, wl):
