@@ -329,5 +329,10 @@ def test_image_area_light(tmp_path):
     top, bottom = out[4:7, 6:10].mean(axis=(0, 1)), out[9:12, 6:10].mean(axis=(0, 1))
     np.testing.assert_allclose(top, [2, 0, 0], atol=0.08)
     np.testing.assert_allclose(bottom, [0, 1, 0], atol=0.05)
+    # 'power' P: pbrt-v4's k_e = pi A (per triangle, area 2) times the image's mean luminance.
+    mean_lum = 0.5 * 0.2126 + 0.5 * 0.5 * 0.7152
+    out = render(write(tmp_path, AREA.format(z=5, light='"string filename" "e.exr" "float power" 10'), "p.pbrt"))
+    k = 10 / (math.pi * 2 * mean_lum)
+    np.testing.assert_allclose(out[4:7, 6:10].mean(axis=(0, 1)), [k, 0, 0], atol=0.04 * k)
     with pytest.raises(XMLError, match="give either"):
         to_dict(write(tmp_path, AREA.format(z=5, light='"string filename" "e.exr" "rgb L" [1 1 1]'), "x.pbrt"))
