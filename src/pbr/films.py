@@ -13,12 +13,14 @@ border pixels average over the image only, as Mitsuba's film does."""
 
 from __future__ import annotations
 
+import functools
 import math
 
 import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from . import backend
 from . import spectrum as spec
 from .filters import FILTERS, GaussianFilter
 from .plugins.props import Props, SceneError, did_you_mean
@@ -96,6 +98,10 @@ class HDRFilm:
     def set_exposure(self, seconds: float) -> None:
         """The camera's shutter interval (pbrt-v4's films scale by it; Mitsuba's do not)."""
 
+    def to_xyz(self, L, wl):
+        """A sample's values that ``xyz_matrix`` (identity: None) takes to XYZ."""
+        return spec.to_xyz(L, wl)
+
     @property
     def plain(self) -> bool:
         """Whether the film is an RGB image with no extra channels and no sensor (what
@@ -152,13 +158,86 @@ def white_balance(src_xy, dst_xy) -> np.ndarray:
     return np.linalg.inv(_BRADFORD) @ np.diag(lms_d / lms_s) @ _BRADFORD
 
 
+# ------------------------------------------------ pbrt-v4's camera sensors
+
+_LAM_1NM = np.arange(spec.LAMBDA_MIN, spec.LAMBDA_MAX + 1.0)    # pbrt-v4's 1 nm sums
+
+
+def _data(name):
+    import os
+    return os.path.join(os.path.dirname(__file__), "data", name)
+
+
+@functools.lru_cache(maxsize=None)
+def camera_sensors() -> dict:
+    """pbrt-v4's named camera sensors: name -> (wavelengths (nm), r, g, b response curves)
+    from ``data/camera_sensors.txt`` (pbrt-v4's measured curves)."""
+    out, name, rows = {}, None, []
+    with open(_data("camera_sensors.txt")) as fh:
+        for ln in list(fh) + ["camera -"]:
+            if ln.startswith("#") or not ln.strip():
+                continue
+            if ln.startswith("camera "):
+                if name is not None:
+                    out[name] = tuple(np.array(rows).T)
+                name, rows = ln.split()[1], []
+            else:
+                rows.append([float(x) for x in ln.split()])
+    return out
+
+
+def _piecewise(lam, x, y):
+    """pbrt-v4's PiecewiseLinearSpectrum: linear between the samples, 0 outside."""
+    return np.interp(lam, x, y, left=0.0, right=0.0)
+
+
+def daylight_spectrum(t: float, lam: np.ndarray) -> np.ndarray:
+    """pbrt-v4's ``Spectra::D(t)``: CIE daylight of correlated colour temperature t (with
+    pbrt-v4's 1.4388/1.4380 correction of t), a blackbody below 4000 K; relative units."""
+    cct = t * 1.4388 / 1.4380
+    if cct < 4000.0:
+        return spec.blackbody(lam, cct)
+    s = 1e3 / cct
+    x = (-4.607 * s ** 3 + 2.9678 * s ** 2 + 0.09911 * s + 0.244063 if cct <= 7000.0 else
+         -2.0064 * s ** 3 + 1.9018 * s ** 2 + 0.24748 * s + 0.23704)
+    y = -3.0 * x * x + 2.870 * x - 0.275
+    m = 0.0241 + 0.2562 * x - 0.7341 * y
+    m1, m2 = (-1.3515 - 1.7703 * x + 5.9114 * y) / m, (0.0300 - 31.4424 * x + 30.0717 * y) / m
+    b = spec.read_table(_data("cie_daylight_s012.spd"))
+    return _piecewise(lam, b[:, 0], (b[:, 1] + m1 * b[:, 2] + m2 * b[:, 3]) * 0.01)
+
+
+@functools.lru_cache(maxsize=None)
+def sensor_xyz_matrix(name: str, white: float) -> np.ndarray:
+    """pbrt-v4's ``PixelSensor`` XYZ-from-sensor-RGB matrix of camera ``name`` white-balanced
+    for daylight ``white`` (K): the least-squares fit, over the 24 ColorChecker swatches lit
+    by that daylight, of the sensor's RGB (each normalised by the sensor's g response to the
+    light) to the swatches' XYZ under sRGB's D65 (normalised by Y), times white Y / white g."""
+    lam = _LAM_1NM
+    wl, *rgb = camera_sensors()[name]
+    r, g, b = (_piecewise(lam, wl, c) for c in rgb)
+    illum = daylight_spectrum(white, lam)
+    xyz_tab, d65_tab = spec.cie_tables_np()
+    grid = spec.LAMBDA_MIN + 5.0 * np.arange(len(d65_tab))
+    cx, cy, cz = (np.interp(lam, grid, xyz_tab[:, k]) for k in range(3))
+    d65 = np.interp(lam, grid, d65_tab)
+    sw = spec.read_table(_data("colorchecker_swatches.spd"))
+    refl = np.stack([_piecewise(lam, sw[:, 0], sw[:, k]) for k in range(1, sw.shape[1])])   # (24, n)
+    cam = np.stack([(refl * illum * c).sum(axis=1) for c in (r, g, b)], axis=1) / (g * illum).sum()
+    xyz = np.stack([(refl * d65 * c).sum(axis=1) for c in (cx, cy, cz)], axis=1) / (cy * d65).sum()
+    xyz *= (illum * cy).sum() / (illum * g).sum()
+    mt, *_ = np.linalg.lstsq(cam, xyz, rcond=None)      # cam @ M^T ~ xyz
+    return mt.T
+
+
 @FILMS.register("rgb")
 class RGBFilm(HDRFilm):
     """``rgb`` (pbrt-v4's): an RGB image (linear sRGB) through pbrt-v4's pixel sensor:
     XYZ matching ('cie1931') times the imaging ratio exposure time * iso / 100 (the
     exposure time is the camera's shutter interval), optionally white balanced (von Kries,
     Bradford) from CIE daylight at ``whitebalance`` kelvin to sRGB's D65 white; each
-    sample's RGB is scaled down to at most ``maxcomponentvalue``. Nested: a filter.
+    sample's sensor values (XYZ, or a camera's RGB) times the imaging ratio are scaled
+    down to at most ``maxcomponentvalue`` (pbrt-v4's clamp). Nested: a filter.
 
     =================  =========  ==========  ================================================
     name               type       default     meaning
@@ -169,7 +248,7 @@ class RGBFilm(HDRFilm):
     pixelbounds        int[4]     -           x0, x1, y0, y1 of the rendered part (pixels)
     iso                float      100         sensitivity (imaging ratio t * iso / 100)
     whitebalance       float      0           daylight temperature to balance for (0: none)
-    sensor             string     'cie1931'   only 'cie1931' (camera response curves: no)
+    sensor             string     'cie1931'   'cie1931' or a camera: 'canon_eos_100d', ...
     maxcomponentvalue  float      inf         largest RGB component of a sample
     filename           string     -           accepted (pbr returns the image)
     diagonal           float      35          accepted (film diagonal, mm: ``realistic``)
@@ -220,12 +299,20 @@ class RGBFilm(HDRFilm):
 
     def _sensor(self, props: Props) -> None:
         self.iso = props.float("iso", 100.0, min=0.0)
-        props.string("sensor", "cie1931", choices=("cie1931",))
+        self.sensor = props.string("sensor", "cie1931", choices=("cie1931", *camera_sensors()))
         self.max_component = props.float("maxcomponentvalue", math.inf, min=0.0) if props.has(
             "maxcomponentvalue") else math.inf
         wb = props.float("whitebalance", 0.0, min=0.0)
         self.white = np.eye(3)
-        if wb != 0.0:
+        self.curves = None
+        if self.sensor != "cie1931":
+            # pbrt-v4: a camera sensor is white-balanced for 6500 K daylight unless told otherwise.
+            if wb == 0.0:
+                wb = 6500.0
+            self.white = sensor_xyz_matrix(self.sensor, wb)
+            wl, *rgb = camera_sensors()[self.sensor]
+            self.curves = np.stack([_piecewise(_LAM_1NM, wl, c) for c in rgb])
+        elif wb != 0.0:
             try:
                 src = _daylight_xy(wb)
             except ValueError:
@@ -235,8 +322,37 @@ class RGBFilm(HDRFilm):
         self.set_exposure(1.0)
 
     def set_exposure(self, seconds: float) -> None:
-        m = self.white * (seconds * self.iso / 100.0)
-        self.xyz_matrix = None if np.allclose(m, np.eye(3), atol=0.0, rtol=0.0) else m
+        self.imaging_ratio = seconds * self.iso / 100.0
+        m = self.white * self.imaging_ratio
+        self.xyz_matrix = None if np.allclose(m, np.eye(3), atol=0.0, rtol=0.0) and self.curves is None else m
+
+    def to_xyz(self, L, wl):
+        """A sample's tristimulus values: XYZ, or with a camera sensor its RGB response
+        (the curves' Monte Carlo integral over L, in XYZ's units), which ``xyz_matrix``
+        takes to XYZ."""
+        if self.curves is None:
+            return spec.to_xyz(L, wl)
+        tabs = self._curve_tables()
+        inv = dr.select(wl.pdf != 0, dr.rcp(wl.pdf), 0.0) * (1.0 / (spec.N_WAVELENGTHS * spec.CIE_Y_INTEGRAL))
+        Lw = L * inv
+        out = [mi.Float(0.0), mi.Float(0.0), mi.Float(0.0)]
+        for k in range(spec.N_WAVELENGTHS):
+            lam = wl.lambda_[k]
+            inside = (lam >= spec.LAMBDA_MIN) & (lam <= spec.LAMBDA_MAX)
+            t = dr.clip(lam - spec.LAMBDA_MIN, 0.0, len(_LAM_1NM) - 1.0)
+            i0 = dr.minimum(mi.UInt32(t), len(_LAM_1NM) - 2)
+            f = t - mi.Float(i0)
+            for c, tab in enumerate(tabs):
+                v = dr.lerp(dr.gather(mi.Float, tab, i0, inside), dr.gather(mi.Float, tab, i0 + 1, inside), f)
+                out[c] = out[c] + dr.select(inside, v, 0.0) * Lw[k]
+        return mi.Array3f(*out)
+
+    def _curve_tables(self):
+        key = backend.variant()
+        cache = self.__dict__.setdefault("_tables", {})
+        if key not in cache:
+            cache[key] = [mi.Float(c.astype(np.float32)) for c in self.curves]
+        return cache[key]
 
 
 @FILMS.register("spectral")

@@ -286,7 +286,7 @@ class SamplingIntegrator:
         if ray_weight is not None:
             L = L * ray_weight
         extra = [*film_channels(scene, cam, rng, ray, wl, L, inside), *extra]
-        xyz = clamp_sample(cam.film, spec.to_xyz(L, wl))
+        xyz = clamp_sample(cam.film, cam.film.to_xyz(L, wl))
         xyz, *extra = self.counter().replace([xyz * weight, *extra], inside)
         extra = [c * weight for c in extra]
         stats = [xyz.y * xyz.y, xyz.y * weight, weight * weight] if moments else []
@@ -471,14 +471,13 @@ def film_channels(scene, cam, rng, ray, wl, L, active) -> list:
 
 
 def clamp_sample(film, xyz):
-    """A sample's XYZ scaled down so that its sensor RGB's largest component is at most
-    the film's ``max_component`` (pbrt-v4's maxcomponentvalue)."""
+    """A sample's sensor values (XYZ, or a camera sensor's RGB) times the imaging ratio,
+    scaled down so that their largest component is at most the film's ``max_component``
+    (pbrt-v4's maxcomponentvalue clamps the sensor RGB, before the output transform)."""
     if not np.isfinite(film.max_component):
         return xyz
-    m = film.xyz_matrix
-    v = xyz if m is None else mi.Array3f(*[sum(float(m[r][c]) * xyz[c] for c in range(3)) for r in range(3)])
-    rgb = spec.xyz_to_srgb(v)
-    top = dr.maximum(dr.maximum(rgb[0], rgb[1]), rgb[2])
+    v = xyz * float(getattr(film, "imaging_ratio", 1.0))
+    top = dr.maximum(dr.maximum(v[0], v[1]), v[2])
     return xyz * dr.select(top > film.max_component, film.max_component / dr.maximum(top, 1e-30), 1.0)
 
 

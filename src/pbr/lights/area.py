@@ -1,4 +1,5 @@
-"""``area``: a one-sided diffuse emitter attached to a shape; on a triangle mesh one light
+"""``area``: a diffuse emitter attached to a shape (one-sided, or two-sided as pbrt-v4's
+``twosided``); on a triangle mesh one light
 per triangle (pbrt-v4), so that the light samplers see each with its power and bounds.
 Sampling and bounds: docs/lights.md.
 """
@@ -64,13 +65,14 @@ def _shape_normal_cone(shape):
 
 @LIGHT_TYPES.register("area")
 class AreaLight(LightType):
-    """``area`` (on a shape): uniform emission from the front of the surface (a triangle mesh
-    is one light per triangle).
+    """``area`` (on a shape): uniform emission from the front of the surface, or from both
+    sides (a triangle mesh is one light per triangle).
 
     ========  =======  =======  =================================================================
     name      type     default  meaning
     ========  =======  =======  =================================================================
     radiance  texture  1        emitted radiance (RGB: times D65, as Mitsuba's spectral variants)
+    twosided  bool     false    emit from the back too (pbrt-v4's; twice the power)
     ========  =======  =======  =================================================================
     """
 
@@ -78,8 +80,9 @@ class AreaLight(LightType):
 
     def add(self, loader, props, shape_index=None) -> int:
         slot = load_spectrum(loader, props.raw("radiance", 1.0), props.key("radiance"), emitter=True)
+        two = props.bool("twosided", False)
         props.finish()
-        self.instances.append({"radiance": slot, "shape": shape_index})
+        self.instances.append({"radiance": slot, "shape": shape_index, "twosided": two})
         return len(self.instances) - 1
 
     # -- sub-lights --------------------------------------------------------------------
@@ -98,12 +101,13 @@ class AreaLight(LightType):
         consts = [scene.textures.constant_value(inst["radiance"]) for inst in self.instances]
         self._count, self._first, self._mesh = [], [], []
         self._power, self._bounds = [], []
-        cols = {k: [] for k in ("radiance", "area", "other", "kind", "P", "n", "vn", "uv")}
+        cols = {k: [] for k in ("radiance", "area", "other", "kind", "P", "n", "vn", "uv", "two")}
         self.other_shapes = []        # pbr shapes of the MITSUBA sub-lights
         o = 0
         for inst, L in zip(self.instances, consts):
             k = int(scene.geometry.mi_index[inst["shape"]])   # its place in Mitsuba's shapes()
             shape = shapes[k]
+            sides = 2.0 if inst["twosided"] else 1.0
             if _is_triangle_mesh(shape):
                 v, f, vn, uv = _mesh_arrays(shape)
                 # Mitsuba's flip_normals flips both normals, not the winding.
@@ -123,10 +127,10 @@ class AreaLight(LightType):
                     unit = VN / np.maximum(np.linalg.norm(VN, axis=2, keepdims=True), 1e-30)
                     cos_o = np.minimum(1.0, np.einsum("fj,fkj->fk", ng, unit).min(axis=1))
                     cos_o = np.where(cos_o > 0, cos_o, -1.0)
-                phi = np.where(a2 > 0, np.pi * A * L, 0.0)
+                phi = np.where(a2 > 0, sides * np.pi * A * L, 0.0)
                 self._bounds.append({"p_min": P.min(axis=1), "p_max": P.max(axis=1), "phi": phi, "w": ng,
                                      "cos_theta_o": cos_o, "cos_theta_e": np.zeros(c),
-                                     "two_sided": np.zeros(c, bool)})
+                                     "two_sided": np.full(c, inst["twosided"])})
                 cols["kind"].append(np.full(c, TRIANGLE))
                 cols["P"].append(P)
                 cols["n"].append(ng)
@@ -136,7 +140,7 @@ class AreaLight(LightType):
             else:
                 c = 1
                 A = np.array([float(shape.surface_area()[0])])
-                phi = np.pi * A * L
+                phi = sides * np.pi * A * L
                 if shape.class_name() == "Rectangle":
                     P, ng = _rectangle(shape)
                     corners = np.vstack([P, P[1] + P[2] - P[0]])
@@ -149,7 +153,7 @@ class AreaLight(LightType):
                     P, ng = np.zeros((3, 3)), np.zeros(3)
                     cols["kind"].append(np.full(1, MITSUBA))
                 self._bounds.append({"p_min": lo, "p_max": hi, "phi": float(phi[0]), "w": w,
-                                     "cos_theta_o": cos_o, "cos_theta_e": 0.0, "two_sided": False})
+                                     "cos_theta_o": cos_o, "cos_theta_e": 0.0, "two_sided": inst["twosided"]})
                 cols["P"].append(P[None])
                 cols["n"].append(ng[None])
                 cols["vn"].append(np.zeros((1, 3, 3)))
@@ -158,6 +162,7 @@ class AreaLight(LightType):
             self._power.append(phi)
             cols["area"].append(A)
             cols["radiance"].append(np.full(c, inst["radiance"]))
+            cols["two"].append(np.full(c, inst["twosided"]))
             mitsuba = cols["kind"][-1][0] == MITSUBA
             if mitsuba:
                 self.other_shapes.append(inst["shape"])
@@ -172,6 +177,8 @@ class AreaLight(LightType):
         f32 = np.float32
         self.radiance = mi.UInt32(cat["radiance"].astype(np.uint32))
         self.radiance_reach = tuple(int(x) for x in np.unique(cat["radiance"]))
+        self.any_two = bool(cat["two"].any())
+        self.two = mi.Bool(cat["two"])
         self.area = mi.Float(cat["area"].astype(f32))
         kind = cat["kind"]
         self.kinds = sorted(set(int(x) for x in np.unique(kind)))
@@ -204,8 +211,11 @@ class AreaLight(LightType):
         return self._bounds[i]
 
     # -- radiance and sampling -----------------------------------------------------------
+    def _two_sided(self, idx, active):
+        return dr.gather(mi.Bool, self.two, idx, active) if self.any_two else mi.Bool(False)
+
     def L(self, idx, si, wl, active):
-        active = active & (si.wi.z > 0)
+        active = active & ((si.wi.z > 0) | self._two_sided(idx, active))
         slot = dr.gather(mi.UInt32, self.radiance, idx, active)
         return dr.select(active, self.textures.eval(slot, si.uv, wl.lambda_, active, reach=self.radiance_reach), 0.0)
 
@@ -259,7 +269,8 @@ class AreaLight(LightType):
         dist2 = dr.squared_norm(d)
         wi = d * dr.rsqrt(dist2)
         cos_g = dr.abs(dr.dot(ng, wi))
-        active = active & (dr.dot(ns, wi) < 0) & (cos_g > 0) & (area > 0) & (dist2 > 0)
+        front = (dr.dot(ns, wi) < 0) | self._two_sided(idx, active)
+        active = active & front & (cos_g > 0) & (area > 0) & (dist2 > 0)
         pdf = dist2 / (cos_g * area)
         slot = dr.gather(mi.UInt32, self.radiance, idx, active)
         L = self.textures.eval(slot, uv, wl.lambda_, active, reach=self.radiance_reach)
@@ -282,19 +293,26 @@ class AreaLight(LightType):
         (the side that emits, as in ``L``); ``n`` is the geometric normal turned to that side."""
         p, ng, ns, uv = self._sample_point(idx, u_pos, active)
         area = dr.gather(mi.Float, self.area, idx, active)
-        local = square_to_cosine_hemisphere(u_dir)
+        two = self._two_sided(idx, active)
+        back = two & (u_dir.x >= 0.5)            # two-sided: half the samples leave the back
+        ux = dr.select(two, dr.minimum(dr.select(back, u_dir.x - 0.5, u_dir.x) * 2.0, 0.99999994), u_dir.x)
+        local = square_to_cosine_hemisphere(mi.Point2f(ux, u_dir.y))
         d = mi.Frame3f(ns).to_world(local)
+        d = dr.select(back, -d, d)
         n = dr.select(dr.dot(ng, ns) < 0, -ng, ng)
+        n = dr.select(back, -n, n)
         ok = active & (area > 0) & (local.z > 0)
         slot = dr.gather(mi.UInt32, self.radiance, idx, ok)
         L = self.textures.eval(slot, uv, wl.lambda_, ok, reach=self.radiance_reach)
         return LeSample(o=p, d=d, L=dr.select(ok, L, 0.0), pdf_pos=dr.select(ok, dr.rcp(area), 0.0),
-                        pdf_dir=dr.select(ok, cosine_hemisphere_pdf(local), 0.0), n=mi.Normal3f(n))
+                        pdf_dir=dr.select(ok, cosine_hemisphere_pdf(local) * dr.select(two, 0.5, 1.0), 0.0),
+                        n=mi.Normal3f(n))
 
     def pdf_Le(self, idx, p, n, d, active):
         """(area density of point ``p``, solid-angle density of direction ``d``) of
         ``sample_Le``; ``n``: the shading normal at ``p`` (e.g. ``si.sh_frame.n`` of a hit)."""
         area = dr.gather(mi.Float, self.area, idx, active)
         ok = active & (area > 0)
-        return (dr.select(ok, dr.rcp(area), 0.0),
-                dr.select(ok, dr.maximum(dr.dot(n, d), 0.0) * dr.inv_pi, 0.0))
+        two = self._two_sided(idx, active)
+        cos = dr.select(two, 0.5 * dr.abs(dr.dot(n, d)), dr.maximum(dr.dot(n, d), 0.0))
+        return (dr.select(ok, dr.rcp(area), 0.0), dr.select(ok, cos * dr.inv_pi, 0.0))

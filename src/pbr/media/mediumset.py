@@ -32,12 +32,13 @@ from ..plugins.params import ParamOwner, param_table
 from ..plugins.props import ALBEDO, HG_ASYMMETRY, NONNEGATIVE, Props, Range, SceneError, did_you_mean
 from ..plugins.registry import Registry
 from ..textures import CONSTANT, load_spectrum
+from .cloud import cloud_density
 from .grid import GridTable, MAJORANT_RES, as_grid, cell_maxima, read_vol
 
 # Type name -> the MediumSet method that parses a medium of that type.
 MEDIUM_TYPES = Registry("medium")
 MEDIUM_TYPES.update(homogeneous="_homogeneous", heterogeneous="_heterogeneous", uniformgrid="_uniformgrid",
-                    rgbgrid="_rgbgrid")
+                    rgbgrid="_rgbgrid", cloud="_cloud")
 
 TA, AS = 0, 1          # parameter forms: (sigma_t, albedo) or (sigma_a, sigma_s)
 NO_GRID = 0xFFFFFFFF
@@ -66,6 +67,7 @@ class _Medium:
         self.le_scale = 1.0
         self.to_local = None          # (4, 4) world -> unit cube, grid media only
         self.phase = (HG, 0.0)
+        self.cloud = None             # (density, wispiness, frequency, p0, p1): pbrt-v4's cloud
 
 
 class MediumSet:
@@ -319,6 +321,36 @@ class MediumSet:
         m.scale = props.float("scale", 1.0, min=0.0)
         self._bounds(props, m)
 
+    def _cloud(self, loader, props, m):
+        """``cloud`` (pbrt-v4's ``CloudMedium``): sigma_a and sigma_s times a procedural
+        density in [0, 1] (:mod:`.cloud`: Perlin noise sums, perturbed by the noise's
+        gradient, thinning with height y) over the box p0..p1. Also the parameters every
+        medium takes (see :meth:`add`), but no ``Le``.
+
+        =========  ========  =======  ==========================================================
+        name       type      default  meaning
+        =========  ========  =======  ==========================================================
+        sigma_a    spectrum  1        absorption at density 1
+        sigma_s    spectrum  1        scattering at density 1
+        density    float     1        factor on the noise sum
+        wispiness  float     1        strength of the gradient perturbation (0: none)
+        frequency  float     5        noise frequency (per unit of medium space)
+        p0, p1     point     0; 1     the medium's box (medium space: the to_world frame)
+        scale      float     1        factor on the coefficients
+        =========  ========  =======  ==========================================================
+        """
+        if props.has("Le"):
+            raise props.error("Le", "a cloud medium does not emit (pbrt-v4's CloudMedium)")
+        m.form = AS
+        m.s1 = self._spectrum(loader, props, "sigma_a", 1.0)
+        m.s2 = self._spectrum(loader, props, "sigma_s", 1.0)
+        m.scale = props.float("scale", 1.0, min=0.0)
+        self._bounds(props, m)
+        p0 = props.vector3("p0", (0.0, 0.0, 0.0))
+        p1 = props.vector3("p1", (1.0, 1.0, 1.0))
+        m.cloud = (props.float("density", 1.0, min=0.0), props.float("wispiness", 1.0, min=0.0),
+                   props.float("frequency", 5.0), p0, p1)
+
     def _emission(self, loader, props, m):
         """pbrt-v4's ``Le`` (an illuminant spectrum, or an RGB grid for ``rgbgrid``) and
         ``Lescale``; for uniformgrid the emission is scaled by the density grid."""
@@ -384,6 +416,15 @@ class MediumSet:
                                     else float(np.clip(m.phase[1], -G_MAX, G_MAX)) for m in ms])
         if self.has_grid:
             self._build_majorants()
+        self.has_cloud = any(m.cloud is not None for m in ms)
+        if self.has_cloud:
+            from ..textures.procedural import NOISE_PERM
+            c = [m.cloud or (0.0, 0.0, 0.0, np.zeros(3), np.ones(3)) for m in ms]
+            self.is_cloud = mi.Bool([m.cloud is not None for m in ms])
+            self.cloud_par = mi.Array3f(*([x[k] for x in c] for k in range(3)))
+            self.cloud_p0 = mi.Array3f(*([float(x[3][k]) for x in c] for k in range(3)))
+            self.cloud_ext = mi.Array3f(*([float(x[4][k] - x[3][k]) for x in c] for k in range(3)))
+            self.perm = mi.UInt32(NOISE_PERM)
 
     def _build_majorants(self):
         """Per medium: world -> unit-cube rows and the majorant grid (two cell maxima
@@ -448,6 +489,13 @@ class MediumSet:
             g2 = dr.gather(mi.UInt32, self.g2, m, grid)
             x = dr.select(grid & (g1 != NO_GRID), x * self.grids.lookup(g1, pl, wl.lambda_, grid & (g1 != NO_GRID)), x)
             y = dr.select(grid & (g2 != NO_GRID), y * self.grids.lookup(g2, pl, wl.lambda_, grid & (g2 != NO_GRID)), y)
+            if self.has_cloud:
+                cl = grid & dr.gather(mi.Bool, self.is_cloud, m, grid)
+                par = dr.gather(mi.Array3f, self.cloud_par, m, cl)
+                pm = dr.gather(mi.Array3f, self.cloud_p0, m, cl) + pl * dr.gather(mi.Array3f, self.cloud_ext, m, cl)
+                d = cloud_density(self.perm, mi.Point3f(pm), par.x, par.y, par.z)
+                d = dr.select(dr.all((pl >= 0.0) & (pl <= 1.0)), d, 0.0)     # bounded by its box
+                x, y = dr.select(cl, x * d, x), dr.select(cl, y * d, y)
         sa, ss = self._combine(m, x, y, scale, active)
         Le = mi.Spectrum(0.0)
         if self.has_le:

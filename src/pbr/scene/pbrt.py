@@ -41,10 +41,12 @@ import numpy as np
 
 from .. import backend
 from ..cameras import SENSORS
-from ..films import FILMS
+from ..films import FILMS, camera_sensors
 from ..filters import FILTERS
 from ..integrators import INTEGRATORS
-from ..spectrum import CIE_Y_INTEGRAL, LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, blackbody, cie_tables_np
+from ..lights import LIGHT_TYPES
+from ..media.mediumset import MEDIUM_TYPES
+from ..spectrum import CIE_Y_INTEGRAL, LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, blackbody, cie_tables_np, xyz_to_srgb
 from ..textures import TEXTURE_TYPES
 from .pbrt_tokens import Directive, Param, read_directives, resolve
 from .xml import XMLError
@@ -123,6 +125,37 @@ def luminance_of(values: np.ndarray, lam: np.ndarray) -> float:
 def _blackbody_luminance(t: float) -> float:
     lam = np.arange(LAMBDA_MIN, LAMBDA_MAX + 1.0)
     return luminance_of(blackbody(lam, t), lam)
+
+
+def _spectrum_srgb(v) -> np.ndarray:
+    """Linear sRGB of a pbr spectrum value as pbrt-v4's ``SpectrumToXYZ`` + sRGB gives it
+    (a ``blackbody`` normalised to a peak of 1, as pbrt-v4's ``BlackbodySpectrum``)."""
+    if isinstance(v, float):
+        return np.full(3, v)
+    if v.get("type") == "rgb":
+        return np.asarray(v["value"], dtype=np.float64)
+    xyz, _ = cie_tables_np()
+    grid = LAMBDA_MIN + 5.0 * np.arange(len(xyz))
+    if v.get("type") == "blackbody":
+        s = blackbody(grid, v["temperature"]) / _blackbody_peak(v["temperature"])
+    else:
+        pr = np.asarray(v["value"], dtype=np.float64)
+        s = np.interp(grid, pr[:, 0], pr[:, 1], left=0.0, right=0.0)
+    XYZ = np.trapezoid(s[:, None] * xyz, grid, axis=0) / CIE_Y_INTEGRAL
+    return xyz_to_srgb(XYZ)
+
+
+def _mean_image_luminance(path: str, p) -> float:
+    """The mean luminance of an image's pixels (pbrt-v4's k_e factor of an image area
+    light given 'power')."""
+    from ..image import read_image
+    try:
+        img = np.asarray(read_image(path), dtype=np.float64)
+    except Exception as e:
+        raise p.error("filename", f"cannot read image {path!r}: {e}") from None
+    if img.ndim == 2:
+        img = img[..., None].repeat(3, axis=2)
+    return float(np.mean(img[..., :3] @ [0.2126, 0.7152, 0.0722]))
 
 
 def _blackbody_peak(t: float) -> float:
@@ -1307,6 +1340,11 @@ class PBRTScene:
             if "Le" in out:
                 out["Lescale"] = p.one("Lescale", "float", 1.0)
             return out
+        if t == "cloud" and self.pbr_plugin(MEDIUM_TYPES, "cloud"):
+            common.pop("Le", None), common.pop("Lescale", None)    # pbrt-v4's cloud does not emit
+            return {"type": "cloud", "p0": list(p0), "p1": list(p1), "to_world": _mi_transform(m),
+                    "density": p.one("density", "float", 1.0), "wispiness": p.one("wispiness", "float", 1.0),
+                    "frequency": p.one("frequency", "float", 5.0), **common}
         if t in ("cloud", "nanovdb"):
             self.unsupported(p.d, f"medium {t!r} ({'procedural clouds' if t == 'cloud' else 'NanoVDB files'}): "
                                   "a homogeneous medium of its sigma_a/sigma_s is used")
@@ -1385,8 +1423,7 @@ class PBRTScene:
             fname = p.string("filename")
             sc = p.one("scale", "float", 1.0)
             if p.has("portal"):
-                p._get("portal", ("point3",))
-                self.unsupported(p.d, "infinite light 'portal' (pbr's portalenvmap takes lat-long maps)")
+                return self.portal_infinite(p, fname, sc, m)
             if fname is not None:
                 return self.image_infinite(p, resolve(fname, self.base), sc, m)
             l, lum = self.emission(p, "L")
@@ -1397,6 +1434,35 @@ class PBRTScene:
                 return {"type": "constant", "radiance": {"type": "rgb", "value": [v * sc / lum for v in l["value"]]}}
             return {"type": "constant", "radiance": {"type": "scale", "tex": l, "scale": sc / lum}}
         raise p.error(None, f"unknown light {t!r} (pbrt-v4's: point, spot, distant, goniometric, projection, infinite)")
+
+    def portal_infinite(self, p, fname, sc, m):
+        """pbrt-v4's portal light (``PortalImageInfiniteLight``): pbr's ``portalenvmap``.
+        The portal's 4 points are in world space (pbrt-v4 ignores the CTM for them); the
+        image, or ``L`` converted to sRGB as pbrt-v4 does (without dividing by L's
+        luminance: only by the illuminant's), is rotated by the CTM as for ``infinite``."""
+        pts = p.array("portal", "point3", 3)
+        if pts.shape != (4, 3):
+            raise p.error("portal", f"expected 4 points, got {len(pts)}")
+        if not self.pbr_plugin(LIGHT_TYPES, "portalenvmap"):
+            self.unsupported(p.d, "infinite light 'portal' (Mitsuba 3 has no portal light): "
+                                  "the environment without the portal is used")
+        if p.one("illuminance", "float", -1.0) > 0:
+            self.unsupported(p.d, "infinite light 'illuminance' with a portal")
+        if fname is not None:
+            if p.has("L"):
+                raise p.error("L", "give either \"L\" or \"filename\"")
+            out = self.image_infinite(p, resolve(fname, self.base), sc, m)
+        else:
+            l, _ = self.emission(p, "L")
+            rgb = np.maximum(_spectrum_srgb(l), 0.0)
+            frame = np.array([[1, 0, 0, 0], [0, 0, -1, 0], [0, 1, 0, 0], [0, 0, 0, 1]], dtype=np.float64)
+            out = {"type": "envmap", "data": np.broadcast_to(rgb.astype(np.float32), (2, 4, 3)).copy(),
+                   "scale": sc, "to_world": _mi_transform(m @ frame)}
+        if out["type"] != "envmap" or not self.pbr_plugin(LIGHT_TYPES, "portalenvmap"):
+            return out
+        out["type"] = "portalenvmap"
+        out["portal"] = pts.tolist()
+        return out
 
     def image_infinite(self, p, fname, sc, m):
         """pbrt-v4's image infinite light: an equal-area octahedral square image, resampled
@@ -1424,11 +1490,25 @@ class PBRTScene:
 
     def area_light(self, p: _Params, shape: dict, sd: Directive) -> dict:
         l, lum = self.emission(p, "L")
+        two = p.bool("twosided", False)
+        extra = {}
+        if two and self.pbr_plugin(LIGHT_TYPES, "area") and not self.mitsuba:
+            extra["twosided"] = True
+        elif two:
+            self.unsupported(p.d, "two-sided area lights in a dict for Mitsuba 3 (its area emitters emit from the "
+                                  "front only): the front is used")
+        image = None
         if p.has("filename"):
-            self.unsupported(p.d, "area light 'filename' (an image on the emitter): L is used")
-            p.p["filename"].used = True
-        if p.bool("twosided", False):
-            self.unsupported(p.d, "two-sided area lights (pbr's area emitters emit from the front only)")
+            if p.has("L"):
+                raise p.error("filename", "give either \"L\" or \"filename\" (pbrt-v4)")
+            fname = resolve(p.string("filename"), self.base)
+            if self.mitsuba:
+                self.unsupported(p.d, "area light 'filename' in a dict for Mitsuba 3: L is used")
+            elif not os.path.exists(fname):
+                self.missing(p.d.where, p.d.name, os.path.basename(fname), fname)
+            else:
+                # pbrt-v4 looks the image up bilinearly at (u, 1 - v): pbr's imagemap convention.
+                image = {"type": "imagemap", "filename": fname, "filter": "bilinear", "wrap": "clamp"}
         sc = p.one("scale", "float", 1.0) / lum
         power = p.one("power", "float", -1.0)
         if power > 0:
@@ -1447,13 +1527,18 @@ class PBRTScene:
                 raise p.error("power", f"the area of this {shape['type']!r} shape is unknown")
             if not area > 0:
                 raise p.error("power", "the emitting shape has no area")
-            k_e = math.pi * area * (2 if p.bool("twosided", False) else 1)
+            k_e = math.pi * area * (2 if two else 1)
+            if image is not None:
+                k_e *= _mean_image_luminance(image["filename"], p)
             sc *= power / k_e
+        if image is not None:
+            return {"type": "area", "radiance": image if sc == 1.0 else {"type": "scale", "tex": image, "scale": sc},
+                    **extra}
         if isinstance(l, float):
-            return {"type": "area", "radiance": l * sc}
+            return {"type": "area", "radiance": l * sc, **extra}
         if l.get("type") == "rgb":
-            return {"type": "area", "radiance": {"type": "rgb", "value": [v * sc for v in l["value"]]}}
-        return {"type": "area", "radiance": {"type": "scale", "tex": l, "scale": sc}}
+            return {"type": "area", "radiance": {"type": "rgb", "value": [v * sc for v in l["value"]]}, **extra}
+        return {"type": "area", "radiance": {"type": "scale", "tex": l, "scale": sc}, **extra}
 
     # -- camera, film, sampler, integrator ------------------------------------------------------------------------
     def finish(self) -> None:
@@ -1518,17 +1603,9 @@ class PBRTScene:
                 if q.name in ("filename", "exposuretime", "xresolution", "yresolution"):
                     q.used = True
                     continue
-                if q.name == "sensor" and sensor != "cie1931":
-                    q.used = True
-                    # pbrt-v4 white-balances a camera sensor to 6500 K unless told otherwise.
-                    self.unsupported(self.film, f"film sensor {sensor!r} (pbrt-v4's measured camera response "
-                                                "curves; pbr has only 'cie1931'): 'cie1931' with white balance "
-                                                f"{wb or 6500:g} K is used")
-                    film["whitebalance"] = float(wb or 6500)
-                    continue
-                if q.name == "whitebalance" and "whitebalance" in film:
-                    q.used = True
-                    continue
+                if q.name == "sensor" and sensor not in camera_sensors() and sensor != "cie1931":
+                    raise f.error("sensor", f"unknown sensor {sensor!r} (pbrt-v4's: cie1931, "
+                                            f"{', '.join(camera_sensors())})")
                 q.used = True
                 film[q.name] = list(q.values) if len(q.values) != 1 else (
                     float(q.values[0]) if q.type == "float" else q.values[0])
