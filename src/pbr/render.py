@@ -17,7 +17,7 @@ import numbers
 import drjit as dr
 
 from . import backend, dispatch
-from .integrators.base import NonFinite
+from .integrators.base import INTEGRATORS, NonFinite
 from .samplers import seed_array
 from .scene.objects import as_integrator
 from .scene.params import SceneParameters, tables_as_leaves, traverse
@@ -127,10 +127,10 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
     spp, spp_grad = _count("spp", spp), _count("spp_grad", spp_grad)
     seed, seed_grad = _seed("seed", seed), _seed("seed_grad", seed_grad)
     counter = integrator.nonfinite = NonFinite(on_nonfinite)
-    if any(s.parameters_grad_enabled() for s in scene.mi_scene.shapes()):
-        raise NotImplementedError("render: a shape's geometry has gradients enabled, but pbr does not "
-                                  "differentiate geometry (no edge sampling or reparameterisation): disable "
-                                  "them (dr.disable_grad)")
+    if scene.geometry_requires_grad() and not getattr(integrator, "geometry_gradients", False):
+        names = sorted(n for n, c in INTEGRATORS.items() if getattr(c, "geometry_gradients", False))
+        raise NotImplementedError(f"render: a shape's geometry has gradients enabled, which the {integrator.name!r} "
+                                  f"integrator does not differentiate; integrators that do: {', '.join(names)}")
     if not scene.requires_grad():
         with sensor_index(scene, sensor) as i:
             img = integrator.render(scene, sensor=i, seed=seed, spp=spp, progress=progress)

@@ -47,6 +47,9 @@ class PathIntegrator(SamplingIntegrator):
     name = "path"
     default_max_depth = -1
     differentiable = True
+    # Interior derivatives w.r.t. the geometry (hits move with the shapes); boundary terms
+    # (visibility) are the projective integrators'.
+    geometry_gradients = True
     next_event = True   # light sampling at each vertex, MIS-weighted against BSDF sampling
     # hide_emitters also hides the environment behind null lobes (null, mask cut-outs,
     # thindielectric's transmission): Mitsuba's path counts a ray valid only once it has
@@ -82,7 +85,8 @@ class PathIntegrator(SamplingIntegrator):
         seen = mi.Bool(False)     # a surface whose sampled lobe is not null (hide_emitters)
 
         while dr.hint(active, label="path"):
-            si, shape = geo.intersect(ray, active)
+            # Replays differentiate the hit w.r.t. the geometry (it moves along the ray).
+            si, shape = geo.intersect(ray, active, attached=not primal)
             hit = active & si.is_valid()
             valid |= hit
 
@@ -113,22 +117,26 @@ class PathIntegrator(SamplingIntegrator):
             with dr.resume_grad(when=not primal):
                 # Attached: the sampled radiance ls.L depends on emitter parameters.
                 ls = lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl, smooth)
+            # The attached density keeps the derivative of the solid-angle measure of an
+            # area light's sample (dist^2 / cos) when the shading point moves; the light's
+            # tables are detached, so it carries no other derivative.
+            pdf_Li = ls.pdf
             ls.pdf = dr.detach(ls.pdf)
             em = smooth & (ls.pdf > 0)
             em &= geo.unoccluded(si, ls.p, em)
-            wo_em = si.to_local(ls.wi)
             # The BSDF is evaluated toward the light and sampled (to continue the path)
             # in one call, so texture lookups are shared.
             u1 = rng.next_float32()
             u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
             with dr.resume_grad(when=not primal):
+                wo_em = si.to_local(ls.wi)   # attached: the hit and its frame may move
                 f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, active_next)
                 # The MIS weight is detached (as Mitsuba's): the BSDF-sampled half of
                 # the same integral carries a detached weight, so an attached one here
                 # would add d(w_em) without its counterpart -d(w_em) (biased gradients
                 # for any parameter the BSDF pdf depends on: eta, alpha).
                 w_em = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf, dr.detach(pdf_em)))
-                Ld = dr.select(em, beta * f_em * ls.L * (w_em / ls.pdf), 0.0)
+                Ld = dr.select(em, beta * f_em * ls.L * (w_em / pdf_Li), 0.0)
                 # A delta lobe cannot be evaluated toward a direction; its attached value
                 # is the sample's weight times the lobe's choice probability (e.g. the
                 # Fresnel reflectance of a smooth dielectric). A stochastic BSDF's eval
@@ -167,8 +175,8 @@ class PathIntegrator(SamplingIntegrator):
 
             beta[~skip] = beta * bs.weight
             eta[~skip] = eta * bs.eta
-            prev_p = mi.Point3f(si.p)
-            prev_n = mi.Normal3f(si.n)
+            prev_p = mi.Point3f(dr.detach(si.p))
+            prev_n = mi.Normal3f(dr.detach(si.n))
             prev_pdf = mi.Float(bs.pdf)
             prev_delta = skip | bs.delta
             ray = dr.select(skip, si.spawn_ray(ray.d), si.spawn_ray(si.to_world(bs.wo)))
