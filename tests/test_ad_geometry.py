@@ -175,3 +175,184 @@ def test_interior_derivative_matches_fd_forward_reverse_and_mitsuba(plane_obj, i
 
     g_mi = _ad(mrender, mp, key, mv0, "reverse", spp=256)
     assert abs(rev - g_mi) <= 0.02 * abs(g_mi), (rev, g_mi)
+
+
+# -- boundary derivatives (projective integrators) ------------------------------------------------
+# Scenes: an icosphere (trimesh, watertight) that moves along x. Gradients are
+# d <ramp, image> / dx, estimated in K independent batches (new seeds), compared by a
+# z-score with the standard errors of both sides.
+Z_MAX = 4.0
+T = mi.ScalarTransform4f
+
+
+def _sphere_obj(path, radius):
+    trimesh = pytest.importorskip("trimesh")
+    m = trimesh.creation.icosphere(subdivisions=2, radius=radius)
+    with open(path, "w") as f:
+        f.writelines(f"v {x} {y} {z}\n" for x, y, z in m.vertices)
+        f.writelines(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in m.faces)
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def ball_obj(tmp_path_factory):
+    return _sphere_obj(tmp_path_factory.mktemp("geom") / "ball.obj", 0.5)
+
+
+@pytest.fixture(scope="module")
+def occluder_obj(tmp_path_factory):
+    return _sphere_obj(tmp_path_factory.mktemp("geom") / "occ.obj", 0.3)
+
+
+def ball_before_lamp(obj, integrator="direct_projective", res=RES):
+    """A black icosphere ('ball') in front of an area light that fills the background:
+    primary visibility only (the ball reflects nothing)."""
+    return {"type": "scene", "integrator": {"type": integrator},
+            "sensor": {"type": "perspective", "fov": 40, "to_world": T().look_at([0, 0, 4], [0, 0, 0], [0, 1, 0]),
+                       "film": {"type": "hdrfilm", "width": res, "height": res}},
+            "ball": {"type": "obj", "filename": obj,
+                     "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}},
+            "lamp": {"type": "rectangle", "to_world": T().translate([0, 0, -1]).scale(2),
+                     "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [1.0, 0.8, 0.6]}}}}
+
+
+def shadow_on_floor(obj, integrator="direct_projective", res=RES):
+    """A black icosphere ('occ') between a small area light and a grey floor: its shadow
+    (and its silhouette against the floor) moves with it."""
+    return {"type": "scene", "integrator": {"type": integrator},
+            "sensor": {"type": "perspective", "fov": 45, "to_world": T().look_at([0, -3, 3], [0, 0, 0], [0, 0, 1]),
+                       "film": {"type": "hdrfilm", "width": res, "height": res}},
+            "occ": {"type": "obj", "filename": obj, "to_world": T().translate([0, 0, 0.8]),
+                    "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}},
+            "floor": {"type": "rectangle", "to_world": T().scale(2),
+                      "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.7, 0.7, 0.7]}}},
+            "lamp": {"type": "rectangle", "to_world": T().translate([0, 0, 2.5]).rotate([1, 0, 0], 180).scale(0.5),
+                     "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [4.0, 4.0, 4.0]}}}}
+
+
+class _Mover:
+    """Moves mesh ``key`` of ``params`` along x (detached shifts, or an attached one)."""
+
+    def __init__(self, params, key):
+        self.p, self.key = params, key
+        self.v0 = mi.Float(np.array(dr.detach(params[key])))
+
+    def set(self, t):
+        pos = dr.unravel(mi.Point3f, mi.Float(self.v0))
+        pos.x += t
+        self.p[self.key] = dr.ravel(pos)
+        self.p.update()
+
+
+def _stats(xs):
+    xs = np.asarray(xs, np.float64)
+    return float(xs.mean()), float(xs.std(ddof=1) / np.sqrt(len(xs)))
+
+
+def _z(a, b):
+    return abs(a[0] - b[0]) / np.hypot(a[1], b[1])
+
+
+def fd_batches(render, mover, res, k, spp, h=0.02, seed0=100):
+    w = ramp(res, res)
+    out = []
+    for i in range(k):
+        vals = []
+        for s in (h, -h):
+            mover.set(s)
+            vals.append(float((np.asarray(render(spp, seed0 + i)) * w).sum()))
+        out.append((vals[0] - vals[1]) / (2 * h))
+    mover.set(0.0)
+    return _stats(out)
+
+
+def ad_batches(render, mover, res, k, spp, mode="reverse", seed0=1):
+    w = mi.TensorXf(ramp(res, res))
+    out = []
+    for i in range(k):
+        t = mi.Float(0.0)
+        dr.enable_grad(t)
+        mover.set(t)
+        img = render(spp, seed0 + i)
+        if mode == "forward":
+            dr.forward(t)
+            out.append(float(dr.sum(dr.grad(img) * w).array[0]))
+        else:
+            dr.backward(dr.sum(img * w))
+            out.append(float(dr.grad(t)[0]))
+    mover.set(0.0)
+    return _stats(out) if k > 1 else out[0]
+
+
+def test_split_vertex_cube_is_welded():
+    """Mitsuba's cube has 24 vertices (4 per face); welded, it has the 12 edges of a cube,
+    each between two faces (the 6 face diagonals are coplanar and dropped)."""
+    from pbr.integrators.projective import EdgeSet
+    scene = pbr.load_dict({"type": "scene", "integrator": {"type": "direct_projective"},
+                           "box": {"type": "cube", "bsdf": {"type": "diffuse"}}})
+    edges = EdgeSet(scene)
+    assert edges.count == 12 and bool(dr.all(edges.has_d)) and edges.n_vertices == 8
+
+
+def test_projective_parameters_are_mitsubas():
+    scene = pbr.load_dict({"type": "scene", "integrator": {"type": "prb_projective", "sppc": 4, "sppp": 8, "sppi": 2,
+                                                            "guiding": "grid", "guiding_proj": False,
+                                                            "proj_seed_spp": 16, "max_depth": 3, "rr_depth": 2},
+                           "box": {"type": "cube"}})
+    i = scene.integrator
+    assert (i.spp_c, i.spp_p, i.spp_i, i.max_depth, i.rr_depth) == (4, 8, 2, 3, 2)
+    with pytest.raises(pbr.SceneError, match="guiding"):
+        pbr.load_dict({"type": "scene", "integrator": {"type": "direct_projective", "guiding": "tree"},
+                       "box": {"type": "cube"}})
+
+
+def test_primary_silhouette_matches_fd_mitsuba_and_needs_the_boundary(ball_obj):
+    res = 16
+    scene = pbr.load_dict(ball_before_lamp(ball_obj, res=res))
+    p = pbr.traverse(scene)
+    mover = _Mover(p, "ball.vertex_positions")
+
+    def render(spp, seed, integrator=None):
+        return pbr.render(scene, p, spp=spp, seed=seed, integrator=integrator)
+
+    fd = fd_batches(render, mover, res, 4, 2048)
+    ad = ad_batches(render, mover, res, 4, 64)
+    assert _z(ad, fd) < Z_MAX, (ad, fd)
+    # forward == reverse on the same samples
+    fwd = ad_batches(render, mover, res, 1, 32, "forward")
+    rev = ad_batches(render, mover, res, 1, 32, "reverse")
+    assert abs(fwd - rev) < 1e-3 * abs(rev), (fwd, rev)
+    # must fail: prb has the interior derivative only
+    no_boundary = ad_batches(lambda spp, seed: render(spp, seed, {"type": "prb", "max_depth": 2}), mover, res, 4, 64)
+    assert _z(no_boundary, fd) > 3 * Z_MAX and abs(no_boundary[0]) < 0.1 * abs(fd[0]), (no_boundary, fd)
+    # Mitsuba's direct_projective in llvm_ad_rgb (its spectral variant is off, see docs/inverse.md)
+    variant = mi.variant()
+    try:
+        mi.set_variant("llvm_ad_rgb")
+        ms = mi.load_dict(ball_before_lamp(ball_obj, res=res), optimize=False)
+        mp = mi.traverse(ms)
+        mm = _Mover(mp, "ball.vertex_positions")
+        ref = ad_batches(lambda spp, seed: mi.render(ms, mp, spp=spp, seed=seed)[..., :3], mm, res, 4, 64, seed0=50)
+    finally:
+        mi.set_variant(variant)
+    print(f"primary silhouette: pbr {ad}, FD {fd}, prb {no_boundary}, Mitsuba rgb {ref}")
+    assert _z(ad, ref) < Z_MAX, (ad, ref)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("integrator", ["direct_projective", "prb_projective"])
+def test_primary_silhouette_within_5_percent_of_fd(ball_obj, integrator):
+    """The issue's requirement (pbr is spectral; Mitsuba 3.9's spectral prb_projective is
+    10.6% off on a similar check): within 5% of finite differences on a watertight mesh."""
+    res = 24
+    scene = pbr.load_dict(ball_before_lamp(ball_obj, integrator, res=res))
+    p = pbr.traverse(scene)
+    mover = _Mover(p, "ball.vertex_positions")
+
+    def render(spp, seed):
+        return pbr.render(scene, p, spp=spp, seed=seed)
+
+    fd = fd_batches(render, mover, res, 8, 4096)
+    ad = ad_batches(render, mover, res, 8, 128)
+    print(f"{integrator}: pbr {ad}, FD {fd}")
+    assert _z(ad, fd) < Z_MAX and abs(ad[0] - fd[0]) < 0.05 * abs(fd[0]), (ad, fd)

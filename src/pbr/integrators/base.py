@@ -236,9 +236,12 @@ class SamplingIntegrator:
         g = mi.Array3f([dr.gather(mi.Float, grad_img_flat, pixel * 3 + k, active) for k in range(3)])
         return spec.to_xyz_adjoint(spec.srgb_to_xyz_adjoint(g) * norm, wl)
 
-    def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0):
-        """Propagate the image adjoint ``grad_img`` (H, W, 3) to the scene parameters."""
+    def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0, sample=None):
+        """Propagate the image adjoint ``grad_img`` (H, W, 3) to the scene parameters.
+        ``sample``: the estimator replayed per camera sample (default ``self.sample``;
+        the projective integrators add their boundary terms through it)."""
         self._require_differentiable()
+        sample = sample or self.sample
         self.prepare(scene, sensor)
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
         pixel_w = self._pixel_weights(scene, sensor, seed, spp)
@@ -248,24 +251,26 @@ class SamplingIntegrator:
                 rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
                 pixel = dr.arange(mi.UInt32, w * h * per_pass) // per_pass
                 state = _snapshot(rng)
-                L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
+                L, _ = sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
                 dL = self._develop_adjoint(wl, weight, pixel_w, g, pixel, inside)
                 dL, = self.counter().replace([dL], inside)
                 # L and dL stay lazy: the primal and adjoint loops fuse into one kernel
                 rng.state, rng.inc = _snapshot(state)
-                self.sample(scene, rng, ray, wl, BACKWARD, dL, L, inside)
+                sample(scene, rng, ray, wl, BACKWARD, dL, L, inside)
             dr.eval()
 
-    def render_forward(self, scene, sensor=0, seed=0, spp=0):
-        """Forward-mode derivative of the image w.r.t. the gradients set on parameters."""
+    def render_forward(self, scene, sensor=0, seed=0, spp=0, sample=None):
+        """Forward-mode derivative of the image w.r.t. the gradients set on parameters
+        (``sample``: as in :meth:`render_backward`)."""
         self._require_differentiable()
+        sample = sample or self.sample
         self.prepare(scene, sensor)
         def radiance_derivative(rng, ray, wl, inside):
             state = _snapshot(rng)
-            L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
+            L, _ = sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
             dr.eval(L)
             rng.state, rng.inc = _snapshot(state)
-            return self.sample(scene, rng, ray, wl, FORWARD, None, L, inside)[0]
+            return sample(scene, rng, ray, wl, FORWARD, None, L, inside)[0]
         return self._film(scene, sensor, seed, spp, radiance_derivative, progress=False)
 
     def _require_differentiable(self) -> None:

@@ -50,6 +50,10 @@ class PathIntegrator(SamplingIntegrator):
     # Interior derivatives w.r.t. the geometry (hits move with the shapes); boundary terms
     # (visibility) are the projective integrators'.
     geometry_gradients = True
+    # How a light sample moves when the shading point does: False, it stays on the light
+    # (area measure, as Mitsuba's prb); True, its direction stays (solid angle: what the
+    # projective integrators' boundary terms are consistent with).
+    solid_angle_nee = False
     next_event = True   # light sampling at each vertex, MIS-weighted against BSDF sampling
     # hide_emitters also hides the environment behind null lobes (null, mask cut-outs,
     # thindielectric's transmission): Mitsuba's path counts a ray valid only once it has
@@ -120,7 +124,7 @@ class PathIntegrator(SamplingIntegrator):
             # The attached density keeps the derivative of the solid-angle measure of an
             # area light's sample (dist^2 / cos) when the shading point moves; the light's
             # tables are detached, so it carries no other derivative.
-            pdf_Li = ls.pdf
+            pdf_Li = dr.detach(ls.pdf) if self.solid_angle_nee else ls.pdf
             ls.pdf = dr.detach(ls.pdf)
             em = smooth & (ls.pdf > 0)
             em &= geo.unoccluded(si, ls.p, em)
@@ -129,7 +133,9 @@ class PathIntegrator(SamplingIntegrator):
             u1 = rng.next_float32()
             u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
             with dr.resume_grad(when=not primal):
-                wo_em = si.to_local(ls.wi)   # attached: the hit and its frame may move
+                # attached: the hit and its frame may move (with solid_angle_nee the
+                # direction toward a light that is not a delta is kept fixed)
+                wo_em = si.to_local(dr.select(ls.delta, ls.wi, dr.detach(ls.wi)) if self.solid_angle_nee else ls.wi)
                 f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, active_next)
                 # The MIS weight is detached (as Mitsuba's): the BSDF-sampled half of
                 # the same integral carries a detached weight, so an attached one here
