@@ -67,6 +67,8 @@ ANGLE_EPS = 1e-4
 # Two faces are coplanar (their edge is never a silhouette) below this |sin| of the angle
 # between the fourth vertex and the first face's plane.
 COPLANAR = 1e-6
+# Relative probability of edges that are silhouettes seen from an emitter's vertices.
+LIGHT_BOOST = 16.0
 
 
 def _weld(pos: np.ndarray):
@@ -122,8 +124,10 @@ class EdgeSet:
         a, b, c, d = [], [], [], []
         n_vert = 0
         counts = []
+        emitting = []    # welded vertex ranges of emissive shapes (see edge_weights)
         for i in scene.top_level_shapes():
             shape = geo.mi_shape(i)
+            first = n_vert
             if shape.is_mesh():
                 pos = np.array(dr.detach(shape.vertex_positions_buffer()), dtype=np.float32).reshape(-1, 3)
                 faces = np.array(shape.faces_buffer(), dtype=np.int64).reshape(-1, 3)
@@ -146,7 +150,10 @@ class EdgeSet:
                     c.append(np.array([n_vert + (k + 2) % 4])); d.append(np.array([-1]))
                 counts.append(np.ones(4))
                 n_vert += 4
+            if scene.shape_emitter[i] and n_vert > first:
+                emitting.append((first, n_vert))
         self.n_vertices = n_vert
+        self.emitting = emitting
         self.count = len(np.concatenate(a)) if a else 0
         if not self.count:
             return
@@ -198,12 +205,11 @@ class ProjectivePathIntegrator(PathIntegrator):
     rr_depth       int     5        depth from which Russian roulette may end a path
     hide_emitters  bool    false    camera rays pass through emitting surfaces
     light_sampler  string  bvh      light choice of next-event estimation
-    sppc           int     0        samples per pixel of the interior derivative (0: the render's
-                                    spp_grad)
-    sppp           int     0        samples per pixel of the primary-visibility boundary (0: as
-                                    sppc)
-    sppi           int     0        samples per pixel of the first-hit visibility boundary (0: as
-                                    sppc)
+    sppc           int     -        samples per pixel of the interior derivative: 0 disables it;
+                                    otherwise the render's spp_grad (or spp) wins, then this
+                                    value, then the sensor's sample count (Mitsuba's rule)
+    sppp           int     -        the same for the primary-visibility boundary term
+    sppi           int     -        the same for the first-hit visibility boundary term
     guiding        string  octree   Mitsuba's guiding of indirect-boundary samples: accepted and
                                     ignored ('none', 'grid', 'octree'; pbr chooses edges by length)
     guiding_proj   bool    true     accepted and ignored (Mitsuba's guiding option)
@@ -220,7 +226,8 @@ class ProjectivePathIntegrator(PathIntegrator):
     def __init__(self, props):
         # prb's parameters, then Mitsuba's projective ones (props finished here)
         PathIntegrator.__init__(self, _Unfinished(props))
-        self.spp_c, self.spp_p, self.spp_i = (props.int(k, 0, min=0) for k in ("sppc", "sppp", "sppi"))
+        self.spp_c, self.spp_p, self.spp_i = (props.int(k, min=0) if props.has(k) else None
+                                              for k in ("sppc", "sppp", "sppi"))
         props.string("guiding", "octree", choices=("none", "grid", "octree"))
         props.bool("guiding_proj", True)
         props.int("guiding_rounds", 1, min=1)
@@ -242,30 +249,45 @@ class ProjectivePathIntegrator(PathIntegrator):
     # -- derivatives: interior + boundaries -------------------------------------------------------
     def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0, sample=None):
         n_c, n_p, n_i = self._counts(scene, sensor, spp)
-        super().render_backward(scene, grad_img, sensor, seed, n_c)
+        if n_c:
+            super().render_backward(scene, grad_img, sensor, seed, n_c)
+        else:
+            self.prepare(scene, sensor)
         if not self.edges.count:
             return
         g = grad_img.array if isinstance(grad_img, mi.TensorXf) else mi.Float(np.asarray(grad_img, np.float32).ravel())
         if n_p:
             self._primary(scene, sensor, seed, n_p, BACKWARD, g)
         if n_i:
+            self._distr = self._edge_distribution(dr.detach(self.edges.positions()))
             super().render_backward(scene, grad_img, sensor, _mix(seed, 2), n_i, sample=self._first_hit_boundary)
 
     def render_forward(self, scene, sensor=0, seed=0, spp=0, sample=None):
         n_c, n_p, n_i = self._counts(scene, sensor, spp)
-        img = super().render_forward(scene, sensor, seed, n_c)
+        if n_c:
+            img = super().render_forward(scene, sensor, seed, n_c)
+        else:
+            self.prepare(scene, sensor)
+            w, h = scene.sensors[sensor].film.size
+            img = dr.zeros(mi.TensorXf, (h, w, 3))
         if not self.edges.count:
             return img
         if n_p:
             img = img + self._primary(scene, sensor, seed, n_p, FORWARD, None)
         if n_i:
+            self._distr = self._edge_distribution(dr.detach(self.edges.positions()))
             img = img + super().render_forward(scene, sensor, _mix(seed, 2), n_i, sample=self._first_hit_boundary)
         return img
 
     def _counts(self, scene, sensor, spp):
-        n = int(spp) if spp else scene.sensors[sensor].sampler.sample_count
-        c = self.spp_c or n
-        return c, self.spp_p or c, self.spp_i or c
+        """(sppc, sppp, sppi) of a derivative pass, by Mitsuba's rule: a count set to 0
+        disables its term; otherwise the render's spp (spp_grad) wins, then the count
+        given here, then the sensor's sampler."""
+        sampler_spp = scene.sensors[sensor].sampler.sample_count
+        out = []
+        for n in (self.spp_c, self.spp_p, self.spp_i):
+            out.append(0 if n == 0 else (int(spp) if spp else (n if n is not None else sampler_spp)))
+        return tuple(out)
 
     # -- primary visibility -----------------------------------------------------------------------
     def _primary(self, scene, sensor, seed, spp, mode, g):
@@ -368,7 +390,7 @@ class ProjectivePathIntegrator(PathIntegrator):
         bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
         on = hit & bsdfs.smooth(bsdf_id, hit) & (self.max_depth < 0 or self.max_depth > 1)
         P = dr.detach(edges.positions())
-        distr = self._length_distribution(P)
+        distr = self._distr
         k, pmf = distr.sample_pmf(rng.next_float32())
         t = rng.next_float32()
         a, b, c, d, has_d = edges.gather(P, k, on)
@@ -406,16 +428,26 @@ class ProjectivePathIntegrator(PathIntegrator):
                 return mi.Spectrum(0.0), mi.Bool(active)
         return forward_derivative(term), mi.Bool(active)
 
-    def _length_distribution(self, P):
-        """Edges chosen in proportion to their length (cached per geometry)."""
-        key = self._edges_key
-        if getattr(self, "_distr_key", None) != key:
-            with dr.suspend_grad():
-                k_all = dr.arange(mi.UInt32, self.edges.count)
-                a, b, _, _, _ = self.edges.gather(P, k_all, True)
-                self._distr = mi.DiscreteDistribution(dr.norm(b - a))
-            self._distr_key = key
-        return self._distr
+    def _edge_distribution(self, P):
+        """Edges for the first-hit term: in proportion to length, times ``LIGHT_BOOST`` for
+        the edges that are silhouettes seen from a vertex or the centroid of an emissive
+        shape (those that cast shadow boundaries of small lights). Every edge keeps a
+        nonzero probability, so the estimator stays unbiased; this is a cheap stand-in
+        for Mitsuba's guiding structures."""
+        edges = self.edges
+        with dr.suspend_grad():
+            k_all = dr.arange(mi.UInt32, edges.count)
+            a, b, c, d, has_d = edges.gather(P, k_all, True)
+            weight = dr.norm(b - a)
+            if edges.emitting:
+                pts = np.array(P, dtype=np.float64).reshape(-1, 3)
+                lights = [pts[lo:hi] for lo, hi in edges.emitting]
+                lights = np.concatenate(lights + [np.mean(x, axis=0, keepdims=True) for x in lights])
+                mark = mi.Bool(False)
+                for q in lights.tolist():
+                    mark |= silhouette(mi.Point3f(*q), a, b, c, d, has_d)
+                weight = weight * dr.select(mark, LIGHT_BOOST, 1.0)
+            return mi.DiscreteDistribution(weight)
 
     def _incident(self, scene, rng, ray, wl, active):
         """Radiance arriving along ``ray`` (the rest of a path: one segment fewer than
@@ -442,10 +474,10 @@ class DirectProjectiveIntegrator(ProjectivePathIntegrator):
     rr_depth       int     2        accepted and ignored
     hide_emitters  bool    false    camera rays pass through emitting surfaces
     light_sampler  string  bvh      light choice of next-event estimation
-    sppc           int     0        samples per pixel of the interior derivative (0: spp_grad)
-    sppp           int     0        samples per pixel of the primary-visibility boundary (0: as
-                                    sppc)
-    sppi           int     0        samples per pixel of the shadow boundary (0: as sppc)
+    sppc           int     -        samples per pixel of the interior derivative (0: off; see
+                                    prb_projective for which count wins)
+    sppp           int     -        the same for the primary-visibility boundary term
+    sppi           int     -        the same for the shadow boundary term
     guiding        string  octree   accepted and ignored (Mitsuba's guiding; 'none', 'grid',
                                     'octree')
     guiding_proj   bool    true     accepted and ignored
