@@ -307,7 +307,7 @@ class Geometry:
             self.curve_last_segment = mi.UInt32(last)
             self.curve_v_max = mi.Float(vmax)
 
-    def intersect(self, ray: mi.Ray3f, active, attached: bool = False):
+    def intersect(self, ray: mi.Ray3f, active, attached: bool = False, ray_ad=None):
         """(surface interaction, pbr shape index) of the closest hit (shape 0 on a miss:
         test ``si.is_valid()``).
 
@@ -316,7 +316,8 @@ class Geometry:
         hit on the differentiable triangle (or analytic shape) along the detached ray, so
         that ``p`` slides along the ray and ``n``, ``uv`` and the frame follow the moving
         surface (its ``compute_surface_interaction`` without ``FollowShape``). The ray
-        query itself stays detached."""
+        query itself stays detached; ``ray_ad``: the same ray attached to a camera pose
+        (the hit is then recomputed along it)."""
         with dr.suspend_grad():
             pi = self.mi_scene.ray_intersect_preliminary(ray, False, active)
         hit = active & pi.is_valid()
@@ -328,7 +329,7 @@ class Geometry:
         # RayFlags.All is Mitsuba's default (uv, dp/du, shading frame; no normal partials):
         # the shading frame's tangent follows dp/du, which anisotropic BSDFs rely on.
         with dr.resume_grad(when=attached):
-            si = pi.compute_surface_interaction(ray, mi.RayFlags.All, active)
+            si = pi.compute_surface_interaction(ray if ray_ad is None else ray_ad, mi.RayFlags.All, active)
         if self.instanced:   # instance hits: pi.shape is empty, si.shape is the group's shape
             shape = self.shape_of(si.shape, hit)
         return si, shape

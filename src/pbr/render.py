@@ -127,6 +127,12 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
     spp, spp_grad = _count("spp", spp), _count("spp_grad", spp_grad)
     seed, seed_grad = _seed("seed", seed), _seed("seed_grad", seed_grad)
     counter = integrator.nonfinite = NonFinite(on_nonfinite)
+    camera_grad = any(getattr(c, "to_world_ad", None) is not None and dr.grad_enabled(c.to_world_ad)
+                      for c in scene.sensors)
+    if camera_grad and not getattr(integrator, "camera_gradients", False):
+        names = sorted(n for n, c in INTEGRATORS.items() if getattr(c, "camera_gradients", False))
+        raise NotImplementedError(f"render: a sensor's to_world has gradients enabled, which the {integrator.name!r} "
+                                  f"integrator does not differentiate; integrators that do: {', '.join(names)}")
     if scene.geometry_requires_grad() and not getattr(integrator, "geometry_gradients", False):
         names = sorted(n for n, c in INTEGRATORS.items() if getattr(c, "geometry_gradients", False))
         raise NotImplementedError(f"render: a shape's geometry has gradients enabled, which the {integrator.name!r} "

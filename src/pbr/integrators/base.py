@@ -117,6 +117,8 @@ class SamplingIntegrator:
     recorder = None
     # The count of non-finite samples of the current render (pbr.render sets a fresh one).
     nonfinite = None
+    # The current pass's camera rays attached to the camera pose (None: not differentiated).
+    primary_ray_ad = None
 
     def __init__(self, props):
         self.path = props.path
@@ -191,6 +193,12 @@ class SamplingIntegrator:
         weight = dr.select(inside, weight, 0.0)
         aperture = mi.Point2f(rng.next_float32(), rng.next_float32()) if cam.needs_aperture_sample else None
         ray = cam.sample_ray(mi.Point2f(px / w, py / h), aperture)
+        # A camera pose with gradients: the same rays, attached, for the adjoint passes
+        # of integrators that differentiate it (camera_gradients).
+        self.primary_ray_ad = None
+        if getattr(self, "camera_gradients", False) and getattr(cam, "to_world_ad", None) is not None:
+            with dr.resume_grad():
+                self.primary_ray_ad = cam.sample_ray_attached(mi.Point2f(px / w, py / h))
         return rng, wl, ray, weight, inside
 
     # -- rendering ------------------------------------------------------------------------

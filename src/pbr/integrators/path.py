@@ -88,9 +88,16 @@ class PathIntegrator(SamplingIntegrator):
         dispersive = bsdfs.dispersive
         seen = mi.Bool(False)     # a surface whose sampled lobe is not null (hide_emitters)
 
+        # The camera rays attached to a differentiated camera pose (replays only).
+        ray_ad = None if primal else self.primary_ray_ad
+
         while dr.hint(active, label="path"):
             # Replays differentiate the hit w.r.t. the geometry (it moves along the ray).
-            si, shape = geo.intersect(ray, active, attached=not primal)
+            r_ad = None
+            if ray_ad is not None:
+                with dr.resume_grad():
+                    r_ad = dr.select(depth == 0, ray_ad, ray)
+            si, shape = geo.intersect(ray, active, attached=not primal, ray_ad=r_ad)
             hit = active & si.is_valid()
             valid |= hit
 

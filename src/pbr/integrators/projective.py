@@ -222,6 +222,7 @@ class ProjectivePathIntegrator(PathIntegrator):
     default_max_depth = -1
     hide_through_null = False
     solid_angle_nee = True
+    camera_gradients = True   # a perspective camera's pose (sensor to_world)
 
     def __init__(self, props):
         # prb's parameters, then Mitsuba's projective ones (props finished here)
@@ -327,7 +328,8 @@ class ProjectivePathIntegrator(PathIntegrator):
             x, dx = proj.pixel(y), proj.pixel_dt(a, b - a, t)
             speed = dr.norm(dx)
             nrm = mi.Vector2f(-dx.y, dx.x) / speed
-            ok = (pmf > 0) & (speed > 0)
+            # the image integrates over the film only (samples outside it are dropped)
+            ok = (pmf > 0) & (speed > 0) & (x.x >= 0) & (x.x < w) & (x.y >= 0) & (x.y < h)
             weight = dr.select(ok, speed / (pmf * n), 0.0)
             L = []
             for sgn in (-1.0, 1.0):
@@ -339,20 +341,23 @@ class ProjectivePathIntegrator(PathIntegrator):
             xyz = spec.to_xyz(L[0] - L[1], wl) * weight
             ok &= dr.all(dr.isfinite(xyz))
             xyz = dr.select(ok, xyz, 0.0)
-            norm = 1.0 / _filter_integral(rf)
+            fx, fy = _filter_norms(rf, w), _filter_norms(rf, h)
             R = int(math.ceil(rf.radius - 0.5))
             base = mi.Int32(dr.floor(x.x)), mi.Int32(dr.floor(x.y))
             taps = []
             for i in range(-R - 1, R + 2):
                 for j in range(-R - 1, R + 2):
                     px, py = base[0] + i, base[1] + j
-                    fw = rf.eval(x.x - (mi.Float(px) + 0.5)) * rf.eval(x.y - (mi.Float(py) + 0.5)) * norm
-                    inside = ok & (px >= 0) & (px < w) & (py >= 0) & (py < h) & (fw != 0)
+                    inside = ok & (px >= 0) & (px < w) & (py >= 0) & (py < h)
+                    norm = dr.gather(mi.Float, fx, mi.UInt32(px), inside) * dr.gather(mi.Float, fy, mi.UInt32(py), inside)
+                    fw = rf.eval(x.x - (mi.Float(px) + 0.5)) * rf.eval(x.y - (mi.Float(py) + 0.5)) * dr.rcp(norm)
+                    inside &= fw != 0
                     taps.append((mi.UInt32(py * w + px), fw, inside))
         with dr.resume_grad():
             Pa = edges.positions()
             aa, ba, _, _, _ = edges.gather(Pa, k, ok)
-            vn = dr.dot(proj.pixel(dr.fma(ba - aa, t, aa)), dr.detach(nrm))
+            proj_ad = _Projection(cam, w, h, attached=True) if cam.to_world_ad is not None else proj
+            vn = dr.dot(proj_ad.pixel(dr.fma(ba - aa, t, aa)), dr.detach(nrm))
         if mode == BACKWARD:
             with dr.suspend_grad():
                 g_xyz = mi.Array3f(0.0)
@@ -385,7 +390,7 @@ class ProjectivePathIntegrator(PathIntegrator):
         if mode == PRIMAL:
             return mi.Spectrum(0.0), mi.Bool(active)
         edges, geo, bsdfs = self.edges, scene.geometry, scene.bsdfs
-        si, shape = geo.intersect(ray, active, attached=True)
+        si, shape = geo.intersect(ray, active, attached=True, ray_ad=self.primary_ray_ad)
         hit = active & si.is_valid()
         bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
         on = hit & bsdfs.smooth(bsdf_id, hit) & (self.max_depth < 0 or self.max_depth > 1)
@@ -512,10 +517,15 @@ class _Projection:
     """A perspective camera's map from world points to pixel coordinates of its (cropped)
     film, and the derivative along a segment (for the edge measure)."""
 
-    def __init__(self, cam, w, h):
-        m = np.asarray(cam.to_world, np.float64)
-        self.m = m.tolist()
-        self.o = mi.Point3f(*m[:3, 3].tolist())
+    def __init__(self, cam, w, h, attached=False):
+        if attached:     # the camera pose with its gradients (cam.to_world_ad)
+            m = cam.to_world_ad
+            self.m = [[m[r][c] for c in range(4)] for r in range(4)]
+            self.o = mi.Point3f(m[0][3], m[1][3], m[2][3])
+        else:
+            m = np.asarray(cam.to_world, np.float64)
+            self.m = m.tolist()
+            self.o = mi.Point3f(*m[:3, 3].tolist())
         tx = math.tan(math.radians(cam.x_fov) / 2)
         sx, sy, ox, oy = cam._crop
         self.kx, self.ky = -0.5 * w / (tx * sx), -0.5 * h * cam.aspect / (tx * sy)
@@ -543,13 +553,20 @@ class _Projection:
         return mi.Vector2f(self.kx * (D.x * z - X * D.z) * inv2, self.ky * (D.y * z - Y * D.z) * inv2)
 
 
-def _filter_integral(rf) -> float:
-    """The integral of the (separable) pixel filter over the plane."""
+def _filter_norms(rf, n: int) -> mi.Float:
+    """Per pixel index i < n along one film axis, the integral of the pixel filter over
+    the film, int_0^n f(x - i - 1/2) dx: the normalisation of pixel i's value (the film
+    drops samples outside it, so pixels at the border integrate a truncated filter)."""
     xs = np.linspace(-rf.radius, rf.radius, 4001)
     with dr.suspend_grad():
         f = np.array(rf.eval(mi.Float(xs.astype(np.float32))), dtype=np.float64)
-    one = float(np.trapz(f, xs)) if hasattr(np, "trapz") else float(np.trapezoid(f, xs))
-    return one * one
+    centres = np.arange(n) + 0.5
+    out = []
+    for c in centres:
+        inside = (xs + c >= 0) & (xs + c <= n)
+        g = np.where(inside, f, 0.0)
+        out.append(float(np.sum((g[1:] + g[:-1]) * np.diff(xs)) / 2))
+    return mi.Float(np.asarray(out, np.float32))
 
 
 def _mix(seed, k: int):

@@ -218,11 +218,15 @@ class _SensorParam(_Param):
 
     def __init__(self, camera, name, read_only=False):
         flags = _flags("NonDifferentiable", "ReadOnly") if read_only else _flags("NonDifferentiable")
+        if name == "to_world" and hasattr(camera, "sample_ray_attached"):
+            flags = _flags("Discontinuous")   # a pinhole's pose: differentiable (projective integrators)
         super().__init__(camera, name, flags)
 
     def get(self):
         t, cam = variant_types(), self.owner
         if self.name == "to_world":
+            if cam.to_world_ad is not None:
+                return t.Transform4f(cam.to_world_ad)
             return t.Transform4f(np.asarray(cam.to_world, np.float64).tolist())
         if self.name.startswith("principal_point_offset_"):
             return t.Float(cam.pp["xy".index(self.name[-1])])
@@ -241,11 +245,17 @@ class _SensorParam(_Param):
     def set(self, key, value):
         cam = self.owner
         if self.name == "to_world":
-            m = _matrix(value, key)
+            mat = value.matrix if hasattr(value, "matrix") else value
+            attached = isinstance(mat, dr.ArrayBase) and dr.grad_enabled(mat)
+            if attached and self.flags & int(mi.ParamFlags.NonDifferentiable):
+                raise ValueError(f"{key}: the pose of a {type(cam).name!r} camera is not differentiable in pbr "
+                                 f"(a 'perspective' camera's is)")
+            m = _matrix(dr.detach(mat) if attached else value, key)
             lin = m[:3, :3]
             if not np.allclose(lin.T @ lin, np.eye(3), atol=1e-4):
                 raise ValueError(f"{key}: the camera-to-world transform must be rigid (no scale or shear)")
             cam.to_world = m
+            cam.to_world_ad = variant_types().Matrix4f(mat) if attached else None
             return
         try:
             v = float(np.asarray(value, np.float64).ravel()[0]) if not isinstance(value, (int, float)) else float(value)
@@ -480,7 +490,7 @@ class SceneParameters:
         (pbr's and the geometry's)."""
         out = {}
         for k, p in self._params.items():
-            if p.kind in ("pbr", "geometry") and not p.flags & int(mi.ParamFlags.NonDifferentiable):
+            if p.kind in ("pbr", "geometry", "sensor") and not p.flags & int(mi.ParamFlags.NonDifferentiable):
                 v = p.get()
                 if dr.grad_enabled(v):
                     out[k] = v

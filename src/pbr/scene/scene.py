@@ -139,8 +139,11 @@ class Scene:
                 or self.geometry_requires_grad())
 
     def geometry_requires_grad(self) -> bool:
-        """Whether a shape's geometry (vertices, transform) has gradients enabled."""
-        return any(s.parameters_grad_enabled() for s in self.mi_scene.shapes())
+        """Whether a shape's geometry (vertices, transform) or a camera's pose has
+        gradients enabled."""
+        return (any(s.parameters_grad_enabled() for s in self.mi_scene.shapes())
+                or any(getattr(c, "to_world_ad", None) is not None and dr.grad_enabled(c.to_world_ad)
+                       for c in self.sensors))
 
     def __repr__(self):
         w, h = self.sensors[0].film.size
