@@ -22,7 +22,9 @@ Three kinds of keys (``flags(key)`` tells them apart, with Mitsuba's ``mi.ParamF
 - the sensor: ``<sensor>.to_world`` (rigid), ``x_fov`` (degrees), ``near_clip``,
   ``far_clip``, ``principal_point_offset_x``/``_y``; the film's ``size``, ``crop_size``
   and ``crop_offset`` are read-only (load the scene with another film to change them).
-  Not differentiable in pbr.
+  Not differentiable in pbr, except a perspective camera's ``to_world`` (its pose: the
+  projective integrators differentiate it; the attached value is kept as the camera's
+  ``to_world_ad``).
 
 Mitsuba keys pbr does not have (documented exceptions): ``allow_thread_reordering``
 (a CUDA scheduling hint of Mitsuba's), ``<shape>.silhouette_sampling_weight`` (Mitsuba's
