@@ -206,8 +206,9 @@ def occluder_obj(tmp_path_factory):
 
 def ball_before_lamp(obj, integrator="direct_projective", res=RES):
     """A black icosphere ('ball') in front of an area light that fills the background:
-    primary visibility only (the ball reflects nothing)."""
-    return {"type": "scene", "integrator": {"type": integrator},
+    primary visibility only (the ball reflects nothing, so the first-hit term is off:
+    sppi = 0)."""
+    return {"type": "scene", "integrator": {"type": integrator, "sppi": 0},
             "sensor": {"type": "perspective", "fov": 40, "to_world": T().look_at([0, 0, 4], [0, 0, 0], [0, 1, 0]),
                        "film": {"type": "hdrfilm", "width": res, "height": res}},
             "ball": {"type": "obj", "filename": obj,
@@ -387,8 +388,9 @@ def test_shadow_boundary_matches_fd_and_needs_the_first_hit_term(occluder_obj):
 
 
 def box_before_lamp(res=RES):
-    """Mitsuba's split-vertex cube (black) before an area light, seen at an angle."""
-    return {"type": "scene", "integrator": {"type": "direct_projective"},
+    """Mitsuba's split-vertex cube (black) before an area light, seen at an angle
+    (primary visibility only: sppi = 0)."""
+    return {"type": "scene", "integrator": {"type": "direct_projective", "sppi": 0},
             "sensor": {"type": "perspective", "fov": 40, "to_world": T().look_at([1.5, 1.2, 4], [0, 0, 0], [0, 1, 0]),
                        "film": {"type": "hdrfilm", "width": res, "height": res}},
             "box": {"type": "cube", "to_world": T().scale(0.4),

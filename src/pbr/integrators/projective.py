@@ -69,6 +69,11 @@ ANGLE_EPS = 1e-4
 COPLANAR = 1e-6
 # Relative probability of edges that are silhouettes seen from an emitter's vertices.
 LIGHT_BOOST = 16.0
+# First-hit term: candidate edge points per sample (resampled importance sampling), and the
+# target's weight of directions that do not point at an emitter (x10 in prb_projective,
+# whose jumps may come from indirect light).
+CANDIDATES = 24
+CONE_FLOOR = 0.02
 
 
 def _weld(pos: np.ndarray):
@@ -183,6 +188,17 @@ class EdgeSet:
         return g(self.a), g(self.b), g(self.c), g(self.d), dr.gather(mi.Bool, self.has_d, k, active)
 
 
+def _edge_measure(x, a, b, y):
+    """(|e x w| |e| / |y - x|: the solid-angle length swept per unit of the edge
+    parameter at edge point y seen from x, the unit direction w from x to y)."""
+    v = y - x
+    r = dr.norm(v)
+    w = v / r
+    e = b - a
+    meas = dr.norm(dr.cross(w, e)) / r
+    return dr.select(r > 0, meas, 0.0), w
+
+
 def silhouette(p, a, b, c, d, has_d):
     """Whether edge (a, b) with faces' third vertices c, d is a silhouette seen from p."""
     n = dr.cross(a - p, b - p)
@@ -248,7 +264,12 @@ class ProjectivePathIntegrator(PathIntegrator):
             self._edges_key = key
 
     # -- derivatives: interior + boundaries -------------------------------------------------------
+    @staticmethod
+    def _scene_emissive_shapes(scene):
+        return [i for i in scene.top_level_shapes() if scene.shape_emitter[i]]
+
     def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0, sample=None):
+        self._scene = scene
         n_c, n_p, n_i = self._counts(scene, sensor, spp)
         if n_c:
             super().render_backward(scene, grad_img, sensor, seed, n_c)
@@ -264,6 +285,7 @@ class ProjectivePathIntegrator(PathIntegrator):
             super().render_backward(scene, grad_img, sensor, _mix(seed, 2), n_i, sample=self._first_hit_boundary)
 
     def render_forward(self, scene, sensor=0, seed=0, spp=0, sample=None):
+        self._scene = scene
         n_c, n_p, n_i = self._counts(scene, sensor, spp)
         if n_c:
             img = super().render_forward(scene, sensor, seed, n_c)
@@ -395,23 +417,34 @@ class ProjectivePathIntegrator(PathIntegrator):
         bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
         on = hit & bsdfs.smooth(bsdf_id, hit) & (self.max_depth < 0 or self.max_depth > 1)
         P = dr.detach(edges.positions())
-        distr = self._distr
-        k, pmf = distr.sample_pmf(rng.next_float32())
-        t = rng.next_float32()
-        a, b, c, d, has_d = edges.gather(P, k, on)
         x = dr.detach(si.p)
-        on &= silhouette(x, a, b, c, d, has_d) & (pmf > 0)
+        # Resampled importance sampling (RIS) of the edge point: CANDIDATES points drawn by
+        # edge length, one kept in proportion to target / pmf, the target being the edge
+        # measure of a silhouette point times (floor + 1 if its direction points at an
+        # emitter's bounding sphere); estimate = h / target * mean(target / pmf).
+        floor = CONE_FLOOR if self.max_depth == 2 else 10 * CONE_FLOOR
+        wsum = mi.Float(0.0)
+        k, t, target = mi.UInt32(0), mi.Float(0.0), mi.Float(0.0)
+        for _ in range(CANDIDATES):
+            k_i, pmf_i = self._distr.sample_pmf(rng.next_float32())
+            t_i = rng.next_float32()
+            a, b, c, d, has_d = edges.gather(P, k_i, on)
+            y = dr.fma(b - a, t_i, a)
+            meas, wdir = _edge_measure(x, a, b, y)
+            tgt = dr.select(on & silhouette(x, a, b, c, d, has_d), meas, 0.0) * (floor + self._toward_light(x, wdir))
+            w_i = dr.select(pmf_i > 0, tgt / pmf_i, 0.0)
+            wsum += w_i
+            take = rng.next_float32() * wsum < w_i
+            k, t, target = dr.select(take, k_i, k), dr.select(take, t_i, t), dr.select(take, tgt, target)
+        on &= target > 0
+        a, b, c, d, has_d = edges.gather(P, k, on)
         y = dr.fma(b - a, t, a)
         r = dr.norm(y - x)
         wdir = (y - x) / r
-        e = b - a
-        le = dr.norm(e)
-        ed = e / le
-        cr = dr.cross(wdir, ed)
-        sin = dr.norm(cr)
-        nw = cr / sin
-        on &= (sin > 1e-7) & (r > 0)
-        weight = dr.select(on, sin * le / (r * pmf), 0.0)
+        cr = dr.cross(wdir, dr.normalize(b - a))
+        nw = cr / dr.norm(cr)
+        meas, _ = _edge_measure(x, a, b, y)
+        weight = dr.select(on, meas * wsum / (CANDIDATES * target), 0.0)
         si_d = dr.detach(si)
         ctx = ShadingContext(si_d, wl)
         g = []
@@ -433,6 +466,19 @@ class ProjectivePathIntegrator(PathIntegrator):
                 return mi.Spectrum(0.0), mi.Bool(active)
         return forward_derivative(term), mi.Bool(active)
 
+    def _toward_light(self, x, wdir):
+        """1 where direction ``wdir`` from ``x`` points into the bounding sphere of an
+        emissive shape (every direction with an environment light), else 0."""
+        if self._all_directions:
+            return mi.Float(1.0)
+        out = mi.Bool(False)
+        for cx, cy, cz, rad in self._spheres:
+            v = mi.Vector3f(cx, cy, cz) - x
+            dist2 = dr.squared_norm(v)
+            cos_max = dr.safe_sqrt(dr.maximum(1.0 - rad * rad / dr.maximum(dist2, 1e-30), 0.0))
+            out |= (dist2 <= rad * rad) | (dr.dot(v, wdir) >= cos_max * dr.sqrt(dist2))
+        return dr.select(out, 1.0, 0.0)
+
     def _edge_distribution(self, P):
         """Edges for the first-hit term: in proportion to length, times ``LIGHT_BOOST`` for
         the edges that are silhouettes seen from a vertex or the centroid of an emissive
@@ -444,8 +490,17 @@ class ProjectivePathIntegrator(PathIntegrator):
             k_all = dr.arange(mi.UInt32, edges.count)
             a, b, c, d, has_d = edges.gather(P, k_all, True)
             weight = dr.norm(b - a)
+            pts = np.array(P, dtype=np.float64).reshape(-1, 3)
+            self._spheres = []
+            for lo, hi in edges.emitting:
+                q = pts[lo:hi]
+                centre = q.mean(axis=0)
+                self._spheres.append((*centre.tolist(), float(np.linalg.norm(q - centre, axis=1).max()) * 1.001))
+            # emitters the edge table does not hold (environment, other shapes' lights):
+            # every direction may see light
+            held = sum(1 for i in self._scene_emissive_shapes(self._scene)) == len(edges.emitting)
+            self._all_directions = bool(self._scene.lights.has_infinite) or not held or not edges.emitting
             if edges.emitting:
-                pts = np.array(P, dtype=np.float64).reshape(-1, 3)
                 lights = [pts[lo:hi] for lo, hi in edges.emitting]
                 lights = np.concatenate(lights + [np.mean(x, axis=0, keepdims=True) for x in lights])
                 mark = mi.Bool(False)
