@@ -469,3 +469,19 @@ def test_camera_translation_matches_fd(ball_obj):
     with pytest.raises(NotImplementedError, match="'prb' integrator does not differentiate.*prb_projective"):
         render(4, 0, {"type": "prb"})
     mover.set(0.0)
+
+
+def test_first_hit_term_forward_equals_reverse(occluder_obj):
+    """The shadow scene's derivative (all three terms) in forward and reverse mode on the
+    same samples."""
+    res = 12
+    scene = pbr.load_dict(shadow_on_floor(occluder_obj, res=res))
+    p = pbr.traverse(scene)
+    mover = _Mover(p, "occ.vertex_positions")
+
+    def render(spp, seed):
+        return pbr.render(scene, p, spp=spp, seed=seed)
+
+    fwd = ad_batches(render, mover, res, 1, 16, "forward")
+    rev = ad_batches(render, mover, res, 1, 16, "reverse")
+    assert abs(rev) > 0.1 and abs(fwd - rev) < 1e-3 * abs(rev), (fwd, rev)

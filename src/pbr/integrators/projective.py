@@ -17,8 +17,9 @@ boundaries by sampling points on silhouette edges of triangle meshes:
   projected edge on either side (two camera rays, the integrator's own estimator with the
   same random numbers), weighted by the pixel filter of each pixel the point falls on.
 * **visibility at the first surface hit** (``sppi`` samples per pixel): from a camera
-  path's first hit x, an edge chosen in proportion to its length, a point y on it; where
-  the edge is a silhouette seen from x, the jump is f(x, w) L_i(x, w) just beside the
+  path's first hit x, a point y on an edge, chosen by resampled importance sampling among
+  24 candidates drawn by edge length (target: the edge measure below where the edge is a
+  silhouette seen from x, larger toward emitters); the jump is f(x, w) L_i(x, w) just beside the
   direction w = (y - x) / |y - x| on either side (L_i: the rest of the path, by the
   integrator's estimator with one segment fewer), the normal velocity is that of the
   direction, ((v_y - v_x) . n) / |y - x|, and the measure along the edge |e x w| / |y - x|.
@@ -41,7 +42,12 @@ first-hit boundary term is written in. Not handled (documented in docs/inverse.m
 boundaries of analytic shapes other than rectangles (sphere, disk, cylinder: use a mesh),
 discontinuities after the first bounce, hard shadows of point and spot lights (their
 boundary lies on the receiver, not in a direction), non-pinhole cameras, and guiding
-(``guiding`` and its options are accepted and ignored: edges are chosen by length).
+(``guiding`` and its options are accepted and ignored).
+
+A perspective camera's pose (``<sensor>.to_world`` assigned with gradients) is
+differentiated too: the replay's first segment follows the attached camera rays, the
+primary term projects edges with the attached pose, and the first-hit term starts from
+the attached hit.
 """
 
 from __future__ import annotations
@@ -464,7 +470,7 @@ class ProjectivePathIntegrator(PathIntegrator):
             if mode == BACKWARD:
                 dr.backward_from(dL * term, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
                 return mi.Spectrum(0.0), mi.Bool(active)
-        return forward_derivative(term), mi.Bool(active)
+            return forward_derivative(term), mi.Bool(active)
 
     def _toward_light(self, x, wdir):
         """1 where direction ``wdir`` from ``x`` points into the bounding sphere of an
