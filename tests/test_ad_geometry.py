@@ -295,6 +295,21 @@ def test_split_vertex_cube_is_welded():
     assert edges.count == 12 and bool(dr.all(edges.has_d)) and edges.n_vertices == 8
 
 
+def test_mesh_edges():
+    """A quad's diagonal (coplanar faces) is dropped, its sides are boundary edges; a
+    tetrahedron's six edges each have two faces; a non-manifold edge is kept per face."""
+    from pbr.integrators.projective import _mesh_edges
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    a, b, c, d = _mesh_edges(np.array([[0, 1, 2], [0, 2, 3]]), quad)
+    assert sorted(zip(a.tolist(), b.tolist())) == [(0, 1), (0, 3), (1, 2), (2, 3)] and (d == -1).all()
+    tet = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    a, b, c, d = _mesh_edges(np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]), tet)
+    assert len(a) == 6 and (d >= 0).all() and (c != d).all()
+    fan = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, -1, 0.5], [0, 0, 1]], float)
+    a, b, c, d = _mesh_edges(np.array([[0, 1, 2], [0, 1, 3], [0, 1, 4]]), fan)
+    assert len(a) == 9 and sum((x, y) == (0, 1) for x, y in zip(a.tolist(), b.tolist())) == 3
+
+
 def test_projective_parameters_are_mitsubas():
     scene = pbr.load_dict({"type": "scene", "integrator": {"type": "prb_projective", "sppc": 4, "sppp": 8, "sppi": 2,
                                                             "guiding": "grid", "guiding_proj": False,

@@ -106,13 +106,12 @@ def _mesh_edges(faces: np.ndarray, pos: np.ndarray):
     start = np.r_[0, np.flatnonzero(np.diff(key)) + 1]
     count = np.diff(np.r_[start, len(key)])
     two = start[count == 2]
-    out_a, out_b, out_c, out_d = [lo[two]], [hi[two]], [c[two]], [c[two + 1]]
-    single = np.flatnonzero(count != 2)
-    for s in single:
-        for j in range(start[s], start[s] + count[s]):
-            out_a.append(lo[j:j + 1]); out_b.append(hi[j:j + 1]); out_c.append(c[j:j + 1])
-            out_d.append(np.array([-1]))
-    ea, eb, ec, ed = (np.concatenate(x).astype(np.int64) for x in (out_a, out_b, out_c, out_d))
+    # boundary edges (one face) and non-manifold ones (3+ faces: each face's copy)
+    other = np.repeat(count != 2, count)
+    ea = np.concatenate([lo[two], lo[other]]).astype(np.int64)
+    eb = np.concatenate([hi[two], hi[other]]).astype(np.int64)
+    ec = np.concatenate([c[two], c[other]]).astype(np.int64)
+    ed = np.concatenate([c[two + 1], np.full(int(other.sum()), -1)]).astype(np.int64)
     # drop interior edges between coplanar faces
     inner = ed >= 0
     pa, pb, pc = pos[ea], pos[eb], pos[ec]
