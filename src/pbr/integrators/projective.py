@@ -63,7 +63,8 @@ from ..bsdfs.base import ShadingContext
 from ..plugins.props import SceneError
 from ..samplers import IndependentSampler, seed_array
 from ..spectrum import SampledWavelengths
-from .base import BACKWARD, FORWARD, INTEGRATORS, PRIMAL, _snapshot, forward_derivative
+from .base import (BACKWARD, FORWARD, INTEGRATORS, PRIMAL, _snapshot, forward_derivative,
+                   max_samples_per_pass)
 from .path import PathIntegrator
 
 # Offset beside an edge at which the two sides' radiance is estimated: a fraction of a
@@ -344,8 +345,29 @@ class ProjectivePathIntegrator(PathIntegrator):
             return None if mode == BACKWARD else dr.zeros(mi.TensorXf, (h, w, 3))
         distr = mi.DiscreteDistribution(pmf_w)
         n = w * h * spp
+        fx, fy = _filter_norms(rf, w), _filter_norms(rf, h)
+        per_pass = max(1, min(n, max_samples_per_pass()))
+        acc = dr.zeros(mi.Float, w * h * 3) if mode == FORWARD else None
+        for first in range(0, n, per_pass):      # passes of bounded memory
+            acc = self._primary_pass(scene, cam, proj, edges, P, distr, fx, fy, n, first, min(per_pass, n - first),
+                                     seed, mode, g, acc)
+            dr.eval(acc) if acc is not None else dr.eval()
+        if mode == BACKWARD:
+            return None
         with dr.suspend_grad():
-            idx = dr.arange(mi.UInt32, n)
+            pixel = dr.arange(mi.UInt32, w * h)
+            rgb = spec.xyz_to_srgb(mi.Array3f([dr.gather(mi.Float, acc, pixel * 3 + ch) for ch in range(3)]))
+            out = dr.zeros(mi.Float, w * h * 3)
+            for ch in range(3):
+                dr.scatter(out, rgb[ch], pixel * 3 + ch)
+            return mi.TensorXf(out, (h, w, 3))
+
+    def _primary_pass(self, scene, cam, proj, edges, P, distr, fx, fy, n, first, count, seed, mode, g, acc):
+        """Samples ``first`` .. ``first + count`` of the ``n`` of the primary term."""
+        w, h = cam.film.size
+        rf = cam.film.rfilter
+        with dr.suspend_grad():
+            idx = dr.arange(mi.UInt32, count) + dr.opaque(mi.UInt32, first)
             rng = IndependentSampler.make_rng(idx, seed_array(_mix(seed, 1)))
             wl = SampledWavelengths.sample_visible(rng.next_float32())
             k, pmf = distr.sample_pmf(rng.next_float32())
@@ -368,7 +390,6 @@ class ProjectivePathIntegrator(PathIntegrator):
             xyz = spec.to_xyz(L[0] - L[1], wl) * weight
             ok &= dr.all(dr.isfinite(xyz))
             xyz = dr.select(ok, xyz, 0.0)
-            fx, fy = _filter_norms(rf, w), _filter_norms(rf, h)
             R = int(math.ceil(rf.radius - 0.5))
             base = mi.Int32(dr.floor(x.x)), mi.Int32(dr.floor(x.y))
             taps = []
@@ -398,17 +419,11 @@ class ProjectivePathIntegrator(PathIntegrator):
         with dr.resume_grad():
             dv = dr.forward_to(vn, flags=dr.ADFlag.ClearInterior | dr.ADFlag.AllowNoGrad)
         with dr.suspend_grad():
-            acc = dr.zeros(mi.Float, w * h * 3)
             val = xyz * dv
             for pix, fw, inside in taps:
                 for ch in range(3):
                     dr.scatter_reduce(dr.ReduceOp.Add, acc, val[ch] * fw, pix * 3 + ch, inside)
-            pixel = dr.arange(mi.UInt32, w * h)
-            rgb = spec.xyz_to_srgb(mi.Array3f([dr.gather(mi.Float, acc, pixel * 3 + ch) for ch in range(3)]))
-            out = dr.zeros(mi.Float, w * h * 3)
-            for ch in range(3):
-                dr.scatter(out, rgb[ch], pixel * 3 + ch)
-            return mi.TensorXf(out, (h, w, 3))
+        return acc
 
     # -- visibility at the first hit -----------------------------------------------------------------
     def _first_hit_boundary(self, scene, rng, ray, wl, mode, dL, L_in, active):
