@@ -25,6 +25,23 @@ from .base import (INTEGRATORS, BACKWARD, PRIMAL, SamplingIntegrator, depth_limi
                    mis_state, path_state)
 
 
+def face_the_ray(si, ray, mask):
+    """``si`` with its shading normal turned toward the ray's origin where it faces away
+    although the surface is seen (``mask``): near a silhouette, interpolated normals of
+    a mesh can face away from the viewer on faces that are seen edge-on, which makes a
+    thin dark rim inside the silhouette. Radiance beside a silhouette is estimated past
+    that rim (the rim moves with the silhouette, so its two boundaries add up to one
+    jump, from the radiance inside the rim to the background's; Mitsuba's projective
+    integrators make the same correction)."""
+    alpha = dr.dot(si.sh_frame.n, ray.d)
+    eps = 1e-5
+    wrong = mask & (alpha > -eps)
+    n = dr.normalize(si.sh_frame.n - (alpha + eps) * ray.d)
+    si.sh_frame = dr.select(wrong, mi.Frame3f(n), si.sh_frame)
+    si.wi = dr.select(wrong, si.sh_frame.to_local(-ray.d), si.wi)
+    return si
+
+
 @INTEGRATORS.register("path")
 class PathIntegrator(SamplingIntegrator):
     """``path``: unidirectional path tracing with next-event estimation and MIS
@@ -54,6 +71,9 @@ class PathIntegrator(SamplingIntegrator):
     # (area measure, as Mitsuba's prb); True, its direction stays (solid angle: what the
     # projective integrators' boundary terms are consistent with).
     solid_angle_nee = False
+    # Turn the first hit's shading normal toward the ray where it faces away (set by the
+    # projective integrators while they estimate radiance beside a silhouette).
+    face_first_hit = False
     next_event = True   # light sampling at each vertex, MIS-weighted against BSDF sampling
     # hide_emitters also hides the environment behind null lobes (null, mask cut-outs,
     # thindielectric's transmission): Mitsuba's path counts a ray valid only once it has
@@ -99,6 +119,8 @@ class PathIntegrator(SamplingIntegrator):
                     r_ad = dr.select(depth == 0, ray_ad, ray)
             si, shape = geo.intersect(ray, active, attached=not primal, ray_ad=r_ad)
             hit = active & si.is_valid()
+            if self.face_first_hit:
+                si = face_the_ray(si, ray, hit & (depth == 0))
             valid |= hit
 
             # Emission found by BSDF sampling (or seen directly), MIS-weighted.

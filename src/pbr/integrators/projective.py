@@ -381,12 +381,16 @@ class ProjectivePathIntegrator(PathIntegrator):
             ok = (pmf > 0) & (speed > 0) & (x.x >= 0) & (x.x < w) & (x.y >= 0) & (x.y < h)
             weight = dr.select(ok, speed / (pmf * n), 0.0)
             L = []
-            for sgn in (-1.0, 1.0):
-                q = x + nrm * (sgn * PIXEL_EPS)
-                ray = cam.sample_ray(mi.Point2f(q.x / w, q.y / h))
-                r2 = type(rng)()
-                r2.state, r2.inc = _snapshot(rng)
-                L.append(self.sample(scene, r2, ray, wl, PRIMAL, None, None, ok)[0])
+            self.face_first_hit = True       # past the rim of interpolated normals (face_the_ray)
+            try:
+                for sgn in (-1.0, 1.0):
+                    q = x + nrm * (sgn * PIXEL_EPS)
+                    ray = cam.sample_ray(mi.Point2f(q.x / w, q.y / h))
+                    r2 = type(rng)()
+                    r2.state, r2.inc = _snapshot(rng)
+                    L.append(self.sample(scene, r2, ray, wl, PRIMAL, None, None, ok)[0])
+            finally:
+                self.face_first_hit = False
             xyz = spec.to_xyz(L[0] - L[1], wl) * weight
             ok &= dr.all(dr.isfinite(xyz))
             xyz = dr.select(ok, xyz, 0.0)
@@ -534,11 +538,12 @@ class ProjectivePathIntegrator(PathIntegrator):
         ``max_depth``; emitters visible)."""
         saved = self.max_depth, self.hide_emitters
         self.max_depth = saved[0] - 1 if saved[0] > 0 else saved[0]
-        self.hide_emitters = False
+        self.hide_emitters, self.face_first_hit = False, True
         try:
             return PathIntegrator.sample(self, scene, rng, ray, wl, PRIMAL, None, None, active)[0]
         finally:
             self.max_depth, self.hide_emitters = saved
+            self.face_first_hit = False
 
 
 @INTEGRATORS.register("direct_projective")
