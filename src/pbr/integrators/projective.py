@@ -154,7 +154,9 @@ class EdgeSet:
                 counts.append(cnt)
                 n_vert += n_w
             elif shape.shape_type() == int(mi.ShapeType.Rectangle):
-                # corners (-1,-1), (1,-1), (1,1), (-1,1) of the local square: four boundary edges
+                # (Mitsuba 3.9's rectangles are meshes and take the branch above; this is
+                # for a rectangle without triangles.) Corners (-1,-1), (1,-1), (1,1),
+                # (-1,1) of the local square: four boundary edges.
                 self.rects.append((shape, n_vert))
                 for k in range(4):
                     a.append(np.array([n_vert + k])); b.append(np.array([n_vert + (k + 1) % 4]))
