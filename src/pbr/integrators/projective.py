@@ -53,6 +53,7 @@ the attached hit.
 from __future__ import annotations
 
 import math
+import warnings
 
 import drjit as dr
 import mitsuba as mi
@@ -276,8 +277,20 @@ class ProjectivePathIntegrator(PathIntegrator):
     def _scene_emissive_shapes(scene):
         return [i for i in scene.top_level_shapes() if scene.shape_emitter[i]]
 
+    def _warn_uncovered(self, scene) -> None:
+        """Warn (once per shape) about shapes with gradients whose silhouettes pbr does
+        not sample (analytic shapes: their boundary terms are missing)."""
+        warned = self.__dict__.setdefault("_warned", set())
+        for shape in scene.mi_scene.shapes():
+            if shape.parameters_grad_enabled() and not shape.is_mesh() and shape.id() not in warned:
+                warned.add(shape.id())
+                warnings.warn(f"{self.name}: shape {shape.id()!r} is not a triangle mesh; its silhouettes are not "
+                              f"sampled, so the boundary part of its derivative is missing (use a mesh, e.g. an "
+                              f"'obj' or 'ply' sphere)", RuntimeWarning, stacklevel=4)
+
     def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0, sample=None):
         self._scene = scene
+        self._warn_uncovered(scene)
         n_c, n_p, n_i = self._counts(scene, sensor, spp)
         if n_c:
             super().render_backward(scene, grad_img, sensor, seed, n_c)
@@ -294,6 +307,7 @@ class ProjectivePathIntegrator(PathIntegrator):
 
     def render_forward(self, scene, sensor=0, seed=0, spp=0, sample=None):
         self._scene = scene
+        self._warn_uncovered(scene)
         n_c, n_p, n_i = self._counts(scene, sensor, spp)
         if n_c:
             img = super().render_forward(scene, sensor, seed, n_c)
