@@ -626,8 +626,11 @@ def test_analytic_shapes_with_gradients_warn():
     p = pbr.traverse(scene)
     t = mi.Float(0.0)
     dr.enable_grad(t)
-    p["ball.to_world"] = mi.Transform4f().translate(mi.Vector3f(t, 0, 0)) @ mi.Transform4f(p["ball.to_world"])
+    m0 = np.array(p["ball.to_world"].matrix, dtype=np.float64).reshape(4, 4)
+    p["ball.to_world"] = mi.Transform4f().translate(mi.Vector3f(t, 0, 0)) @ mi.Transform4f(m0.tolist())
     p.update()
     img = pbr.render(scene, p, spp=4)
     with pytest.warns(RuntimeWarning, match="'ball' is not a triangle mesh"):
         dr.backward(dr.sum(img))
+    p["ball.to_world"] = mi.Transform4f(m0.tolist())     # detached again
+    p.update()

@@ -289,7 +289,6 @@ class ProjectivePathIntegrator(PathIntegrator):
                               f"'obj' or 'ply' sphere)", RuntimeWarning, stacklevel=4)
 
     def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0, sample=None):
-        self._scene = scene
         self._warn_uncovered(scene)
         n_c, n_p, n_i = self._counts(scene, sensor, spp)
         if n_c:
@@ -302,11 +301,10 @@ class ProjectivePathIntegrator(PathIntegrator):
         if n_p:
             self._primary(scene, sensor, seed, n_p, BACKWARD, g)
         if n_i:
-            self._distr = self._edge_distribution(dr.detach(self.edges.positions()))
+            self._distr = self._edge_distribution(scene, dr.detach(self.edges.positions()))
             super().render_backward(scene, grad_img, sensor, _mix(seed, 2), n_i, sample=self._first_hit_boundary)
 
     def render_forward(self, scene, sensor=0, seed=0, spp=0, sample=None):
-        self._scene = scene
         self._warn_uncovered(scene)
         n_c, n_p, n_i = self._counts(scene, sensor, spp)
         if n_c:
@@ -320,7 +318,7 @@ class ProjectivePathIntegrator(PathIntegrator):
         if n_p:
             img = img + self._primary(scene, sensor, seed, n_p, FORWARD, None)
         if n_i:
-            self._distr = self._edge_distribution(dr.detach(self.edges.positions()))
+            self._distr = self._edge_distribution(scene, dr.detach(self.edges.positions()))
             img = img + super().render_forward(scene, sensor, _mix(seed, 2), n_i, sample=self._first_hit_boundary)
         return img
 
@@ -519,7 +517,7 @@ class ProjectivePathIntegrator(PathIntegrator):
             out |= (dist2 <= rad * rad) | (dr.dot(v, wdir) >= cos_max * dr.sqrt(dist2))
         return dr.select(out, 1.0, 0.0)
 
-    def _edge_distribution(self, P):
+    def _edge_distribution(self, scene, P):
         """Edges for the first-hit term: in proportion to length, times ``LIGHT_BOOST`` for
         the edges that are silhouettes seen from a vertex or the centroid of an emissive
         shape (those that cast shadow boundaries of small lights). Every edge keeps a
@@ -538,8 +536,8 @@ class ProjectivePathIntegrator(PathIntegrator):
                 self._spheres.append((*centre.tolist(), float(np.linalg.norm(q - centre, axis=1).max()) * 1.001))
             # emitters the edge table does not hold (environment, other shapes' lights):
             # every direction may see light
-            held = sum(1 for i in self._scene_emissive_shapes(self._scene)) == len(edges.emitting)
-            self._all_directions = bool(self._scene.lights.has_infinite) or not held or not edges.emitting
+            held = len(self._scene_emissive_shapes(scene)) == len(edges.emitting)
+            self._all_directions = bool(scene.lights.has_infinite) or not held or not edges.emitting
             if edges.emitting:
                 lights = [pts[lo:hi] for lo, hi in edges.emitting]
                 lights = np.concatenate(lights + [np.mean(x, axis=0, keepdims=True) for x in lights])
