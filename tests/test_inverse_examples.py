@@ -5,7 +5,7 @@ of reach of a broken gradient (each is well below the initial error).
 Bounds and loss factors were set from measured runs of the small configurations
 (docs/inverse.md lists them): albedo texture RMSE 0.218 -> 0.040, roughness/IOR max
 error 0.20 -> 0.022, envmap upper-hemisphere RMSE 0.73 -> 0.35, volume density RMSE
-0.18 -> 0.10. The image losses are Monte Carlo estimates with a noise floor, so the loss
+0.18 -> 0.10, box pose max error 0.47 -> 0.14, shape Chamfer distance 0.098 -> 0.043. The image losses are Monte Carlo estimates with a noise floor, so the loss
 test compares the mean of the first two iterations with the mean of the last two.
 """
 
@@ -23,7 +23,9 @@ sys.path.insert(0, os.path.join(ROOT, "examples"))
 
 import optimize_albedo_texture  # noqa: E402
 import optimize_envmap  # noqa: E402
+import optimize_pose  # noqa: E402
 import optimize_roughness_ior  # noqa: E402
+import optimize_shape  # noqa: E402
 import optimize_volume  # noqa: E402
 
 
@@ -62,6 +64,22 @@ def test_envmap_small():
 
 def test_volume_small():
     check(optimize_volume.main(small=True, log=False), bound=0.13, factor=1.8)
+
+
+def test_pose_small():
+    """Geometry (direct_projective): box pose, max error 0.47 -> 0.14 measured."""
+    check(optimize_pose.main(small=True, log=False), bound=0.25, factor=1.2)
+
+
+def test_pose_with_flipped_gradient_fails():
+    res = optimize_pose.main(small=True, log=False, n_iter=6, grad_scale=-1.0)
+    assert res.error > res.initial_error > 0.25
+
+
+@pytest.mark.slow
+def test_shape_small():
+    """Geometry with Large Steps (direct_projective): Chamfer 0.098 -> 0.043 measured (about 30 s)."""
+    check(optimize_shape.main(small=True, log=False), bound=0.065, factor=1.3)
 
 
 def test_notebook_runs(tmp_path, monkeypatch):

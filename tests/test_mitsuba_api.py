@@ -196,11 +196,13 @@ def test_updates_match_mitsuba_after_the_same_update():
     assert not bad.passed, bad
 
 
-def test_geometry_gradients_are_refused():
-    scene = pbr.load_dict(pbr.cornell_box(8, 4))
+def test_geometry_gradients_need_an_integrator_that_has_them():
+    d = pbr.cornell_box(8, 4)
+    d["integrator"] = {"type": "volpath"}
+    scene = pbr.load_dict(d)
     p = pbr.traverse(scene)
     dr.enable_grad(p["small-box.vertex_positions"])
-    with pytest.raises(NotImplementedError, match="does not differentiate geometry"):
+    with pytest.raises(NotImplementedError, match="'volpath' integrator does not differentiate"):
         pbr.render(scene, p)
 
 
@@ -239,7 +241,8 @@ def test_scene_parameters_methods_follow_mitsuba():
     assert sorted(q.keys()) == ["light.emitter.radiance.value", "light.to_world", "sensor.to_world"]
     q = p.copy()
     q.keep(None)
-    assert all(q.flags(k) == 0 for k in q.keys()) and "red.reflectance.value" in q
+    assert all(not q.flags(k) & int(mi.ParamFlags.NonDifferentiable) for k in q.keys()) and "red.reflectance.value" in q
+    assert "small-box.vertex_positions" in q and "light.to_world" not in q   # geometry: differentiable
 
 
 # -- Scene, render, load_dict -----------------------------------------------------------------

@@ -136,6 +136,10 @@ class ProjectiveCamera:
     medium = 0  # index + 1 of the medium the camera sits in (0: vacuum)
     rigid = True  # the camera-to-world transform must be rigid
     clips = True  # reads near_clip / far_clip
+    # An attached camera-to-world matrix (mi.Matrix4f) when ``<sensor>.to_world`` was
+    # assigned a value with gradients (``to_world`` then holds its detached value): the
+    # projective integrators differentiate the camera pose through it.
+    to_world_ad = None
     needs_aperture_sample = False  # sample_ray takes a 2D aperture sample (thinlens)
     motion = None  # CameraMotion of a moving camera (None: static)
 
@@ -415,6 +419,18 @@ class PerspectiveCamera(ProjectiveCamera):
         if self.needs_aperture_sample:
             return self._lens_ray(pos, aperture, time)
         return self._ray(None, dr.normalize(self._near_point(pos)), time)
+
+    def sample_ray_attached(self, pos: mi.Point2f) -> mi.Ray3f:
+        """:meth:`sample_ray` from the attached ``to_world_ad`` (call under
+        ``dr.resume_grad``): the ray's origin and direction carry the camera pose's
+        derivatives."""
+        m = self.to_world_ad
+        d = dr.normalize(self._near_point(pos))
+        dw = mi.Vector3f(*[m[r][0] * d.x + m[r][1] * d.y + m[r][2] * d.z for r in range(3)])
+        inv_z = dr.rcp(d.z)
+        near_t, far_t = self.near_clip * inv_z, self.far_clip * inv_z
+        o = mi.Point3f(m[0][3], m[1][3], m[2][3])
+        return mi.Ray3f(o + dw * near_t, dw, far_t - near_t, 0.0, mi.Spectrum(0))
 
     # -- importance (light tracing, BDPT): pbrt-v4's We, PDF_We, SampleWi ------------------
     def _tan_x(self) -> float:

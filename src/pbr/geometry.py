@@ -307,10 +307,19 @@ class Geometry:
             self.curve_last_segment = mi.UInt32(last)
             self.curve_v_max = mi.Float(vmax)
 
-    def intersect(self, ray: mi.Ray3f, active):
+    def intersect(self, ray: mi.Ray3f, active, attached: bool = False, ray_ad=None):
         """(surface interaction, pbr shape index) of the closest hit (shape 0 on a miss:
-        test ``si.is_valid()``)."""
-        pi = self.mi_scene.ray_intersect_preliminary(ray, False, active)
+        test ``si.is_valid()``).
+
+        ``attached``: the surface interaction carries derivatives w.r.t. the shapes'
+        differentiable parameters (vertex positions, ``to_world``): Mitsuba recomputes the
+        hit on the differentiable triangle (or analytic shape) along the detached ray, so
+        that ``p`` slides along the ray and ``n``, ``uv`` and the frame follow the moving
+        surface (its ``compute_surface_interaction`` without ``FollowShape``). The ray
+        query itself stays detached; ``ray_ad``: the same ray attached to a camera pose
+        (the hit is then recomputed along it)."""
+        with dr.suspend_grad():
+            pi = self.mi_scene.ray_intersect_preliminary(ray, False, active)
         hit = active & pi.is_valid()
         shape = self.shape_of(pi.shape, hit)
         if self._curves:
@@ -319,7 +328,8 @@ class Geometry:
             pi.prim_uv = mi.Point2f(dr.select(end, v, pi.prim_uv.x), pi.prim_uv.y)
         # RayFlags.All is Mitsuba's default (uv, dp/du, shading frame; no normal partials):
         # the shading frame's tangent follows dp/du, which anisotropic BSDFs rely on.
-        si = pi.compute_surface_interaction(ray, mi.RayFlags.All, active)
+        with dr.resume_grad(when=attached):
+            si = pi.compute_surface_interaction(ray if ray_ad is None else ray_ad, mi.RayFlags.All, active)
         if self.instanced:   # instance hits: pi.shape is empty, si.shape is the group's shape
             shape = self.shape_of(si.shape, hit)
         return si, shape

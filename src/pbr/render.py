@@ -18,7 +18,7 @@ import drjit as dr
 
 from . import backend, dispatch
 from .adaptive import Adaptive, adaptive_render
-from .integrators.base import NonFinite
+from .integrators.base import INTEGRATORS, NonFinite
 from .samplers import seed_array
 from .scene.objects import as_integrator
 from .scene.params import SceneParameters, tables_as_leaves, traverse
@@ -137,10 +137,16 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
     spp, spp_grad = _count("spp", spp), _count("spp_grad", spp_grad)
     seed, seed_grad = _seed("seed", seed), _seed("seed_grad", seed_grad)
     counter = integrator.nonfinite = NonFinite(on_nonfinite)
-    if any(s.parameters_grad_enabled() for s in scene.mi_scene.shapes()):
-        raise NotImplementedError("render: a shape's geometry has gradients enabled, but pbr does not "
-                                  "differentiate geometry (no edge sampling or reparameterisation): disable "
-                                  "them (dr.disable_grad)")
+    camera_grad = any(getattr(c, "to_world_ad", None) is not None and dr.grad_enabled(c.to_world_ad)
+                      for c in scene.sensors)
+    if camera_grad and not getattr(integrator, "camera_gradients", False):
+        names = sorted(n for n, c in INTEGRATORS.items() if getattr(c, "camera_gradients", False))
+        raise NotImplementedError(f"render: a sensor's to_world has gradients enabled, which the {integrator.name!r} "
+                                  f"integrator does not differentiate; integrators that do: {', '.join(names)}")
+    if scene.geometry_requires_grad() and not getattr(integrator, "geometry_gradients", False):
+        names = sorted(n for n, c in INTEGRATORS.items() if getattr(c, "geometry_gradients", False))
+        raise NotImplementedError(f"render: a shape's geometry has gradients enabled, which the {integrator.name!r} "
+                                  f"integrator does not differentiate; integrators that do: {', '.join(names)}")
     if target_relative_error is not None or time_budget is not None or return_info:
         return _render_adaptive(scene, sensor, integrator, seed, spp, progress, counter, target_relative_error,
                                 time_budget, return_info)

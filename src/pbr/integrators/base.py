@@ -152,6 +152,8 @@ class SamplingIntegrator:
     job = None
     # The adaptive plan of the current render (pbr.adaptive), None for uniform spp.
     adaptive = None
+    # The current pass's camera rays attached to the camera pose (None: not differentiated).
+    primary_ray_ad = None
 
     def __init__(self, props):
         self.path = props.path
@@ -273,6 +275,12 @@ class SamplingIntegrator:
             ray, self._ray_weight = cam.sample_ray_weighted(mi.Point2f(px / w, py / h), aperture, time)
         else:
             ray, self._ray_weight = cam.sample_ray(mi.Point2f(px / w, py / h), aperture, time), None
+        # A camera pose with gradients: the same rays, attached, for the adjoint passes
+        # of integrators that differentiate it (camera_gradients).
+        self.primary_ray_ad = None
+        if getattr(self, "camera_gradients", False) and getattr(cam, "to_world_ad", None) is not None:
+            with dr.resume_grad():
+                self.primary_ray_ad = cam.sample_ray_attached(mi.Point2f(px / w, py / h))
         return rng, wl, ray, weight, inside
 
     def _pass_sums(self, scene, cam, w, h, spp, per_pass, p, seed, radiance, pixels=None, moments=False):
@@ -340,9 +348,12 @@ class SamplingIntegrator:
         g = mi.Array3f([dr.gather(mi.Float, grad_img_flat, pixel * 3 + k, active) for k in range(3)])
         return spec.to_xyz_adjoint(spec.srgb_to_xyz_adjoint(g) * norm, wl)
 
-    def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0):
-        """Propagate the image adjoint ``grad_img`` (H, W, 3) to the scene parameters."""
+    def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0, sample=None):
+        """Propagate the image adjoint ``grad_img`` (H, W, 3) to the scene parameters.
+        ``sample``: the estimator replayed per camera sample (default ``self.sample``;
+        the projective integrators add their boundary terms through it)."""
         self._require_differentiable()
+        sample = sample or self.sample
         self.prepare(scene, sensor)
         cam, w, h, spp, per_pass, n_pass = self._plan(scene, sensor, spp)
         if not cam.film.plain:
@@ -358,24 +369,26 @@ class SamplingIntegrator:
                 rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed)
                 pixel = dr.arange(mi.UInt32, w * h * per_pass) // per_pass
                 state = rng.copy()
-                L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
+                L, _ = sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
                 dL = self._develop_adjoint(wl, weight, pixel_w, g, pixel, inside)
                 dL, = self.counter().replace([dL], inside)
                 # L and dL stay lazy: the primal and adjoint loops fuse into one kernel
                 rng.assign(state)
-                self.sample(scene, rng, ray, wl, BACKWARD, dL, L, inside)
+                sample(scene, rng, ray, wl, BACKWARD, dL, L, inside)
             dr.eval()
 
-    def render_forward(self, scene, sensor=0, seed=0, spp=0):
-        """Forward-mode derivative of the image w.r.t. the gradients set on parameters."""
+    def render_forward(self, scene, sensor=0, seed=0, spp=0, sample=None):
+        """Forward-mode derivative of the image w.r.t. the gradients set on parameters
+        (``sample``: as in :meth:`render_backward`)."""
         self._require_differentiable()
+        sample = sample or self.sample
         self.prepare(scene, sensor)
         def radiance_derivative(rng, ray, wl, inside):
             state = rng.copy()
-            L, _ = self.sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
+            L, _ = sample(scene, rng, mi.Ray3f(ray), wl, PRIMAL, None, None, inside)
             dr.eval(L)
             rng.assign(state)
-            return self.sample(scene, rng, ray, wl, FORWARD, None, L, inside)[0]
+            return sample(scene, rng, ray, wl, FORWARD, None, L, inside)[0]
         return self._film(scene, sensor, seed, spp, radiance_derivative, progress=False)
 
     def _require_differentiable(self) -> None:

@@ -25,6 +25,23 @@ from .base import (INTEGRATORS, BACKWARD, PRIMAL, SamplingIntegrator, depth_limi
                    mis_state, path_state)
 
 
+def face_the_ray(si, ray, mask):
+    """``si`` with its shading normal turned toward the ray's origin where it faces away
+    although the surface is seen (``mask``): near a silhouette, interpolated normals of
+    a mesh can face away from the viewer on faces that are seen edge-on, which makes a
+    thin dark rim inside the silhouette. Radiance beside a silhouette is estimated past
+    that rim (the rim moves with the silhouette, so its two boundaries add up to one
+    jump, from the radiance inside the rim to the background's; Mitsuba's projective
+    integrators make the same correction)."""
+    alpha = dr.dot(si.sh_frame.n, ray.d)
+    eps = 1e-5
+    wrong = mask & (alpha > -eps)
+    n = dr.normalize(si.sh_frame.n - (alpha + eps) * ray.d)
+    si.sh_frame = dr.select(wrong, mi.Frame3f(n), si.sh_frame)
+    si.wi = dr.select(wrong, si.sh_frame.to_local(-ray.d), si.wi)
+    return si
+
+
 @INTEGRATORS.register("path")
 class PathIntegrator(SamplingIntegrator):
     """``path``: unidirectional path tracing with next-event estimation and MIS
@@ -47,6 +64,16 @@ class PathIntegrator(SamplingIntegrator):
     name = "path"
     default_max_depth = -1
     differentiable = True
+    # Interior derivatives w.r.t. the geometry (hits move with the shapes); boundary terms
+    # (visibility) are the projective integrators'.
+    geometry_gradients = True
+    # How a light sample moves when the shading point does: False, it stays on the light
+    # (area measure, as Mitsuba's prb); True, its direction stays (solid angle: what the
+    # projective integrators' boundary terms are consistent with).
+    solid_angle_nee = False
+    # Turn the first hit's shading normal toward the ray where it faces away (set by the
+    # projective integrators while they estimate radiance beside a silhouette).
+    face_first_hit = False
     next_event = True   # light sampling at each vertex, MIS-weighted against BSDF sampling
     # hide_emitters also hides the environment behind null lobes (null, mask cut-outs,
     # thindielectric's transmission): Mitsuba's path counts a ray valid only once it has
@@ -81,9 +108,19 @@ class PathIntegrator(SamplingIntegrator):
         dispersive = bsdfs.dispersive
         seen = mi.Bool(False)     # a surface whose sampled lobe is not null (hide_emitters)
 
+        # The camera rays attached to a differentiated camera pose (replays only).
+        ray_ad = None if primal else self.primary_ray_ad
+
         while dr.hint(active, label="path"):
-            si, shape = geo.intersect(ray, active)
+            # Replays differentiate the hit w.r.t. the geometry (it moves along the ray).
+            r_ad = None
+            if ray_ad is not None:
+                with dr.resume_grad():
+                    r_ad = dr.select(depth == 0, ray_ad, ray)
+            si, shape = geo.intersect(ray, active, attached=not primal, ray_ad=r_ad)
             hit = active & si.is_valid()
+            if self.face_first_hit:
+                si = face_the_ray(si, ray, hit & (depth == 0))
             valid |= hit
 
             # Emission found by BSDF sampling (or seen directly), MIS-weighted.
@@ -113,22 +150,28 @@ class PathIntegrator(SamplingIntegrator):
             with dr.resume_grad(when=not primal):
                 # Attached: the sampled radiance ls.L depends on emitter parameters.
                 ls = lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl, smooth)
+            # The attached density keeps the derivative of the solid-angle measure of an
+            # area light's sample (dist^2 / cos) when the shading point moves; the light's
+            # tables are detached, so it carries no other derivative.
+            pdf_Li = dr.detach(ls.pdf) if self.solid_angle_nee else ls.pdf
             ls.pdf = dr.detach(ls.pdf)
             em = smooth & (ls.pdf > 0)
             em &= geo.unoccluded(si, ls.p, em)
-            wo_em = si.to_local(ls.wi)
             # The BSDF is evaluated toward the light and sampled (to continue the path)
             # in one call, so texture lookups are shared.
             u1 = rng.next_float32()
             u2 = rng.next_2d()
             with dr.resume_grad(when=not primal):
+                # attached: the hit and its frame may move (with solid_angle_nee the
+                # direction toward a light that is not a delta is kept fixed)
+                wo_em = si.to_local(dr.select(ls.delta, ls.wi, dr.detach(ls.wi)) if self.solid_angle_nee else ls.wi)
                 f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, active_next)
                 # The MIS weight is detached (as Mitsuba's): the BSDF-sampled half of
                 # the same integral carries a detached weight, so an attached one here
                 # would add d(w_em) without its counterpart -d(w_em) (biased gradients
                 # for any parameter the BSDF pdf depends on: eta, alpha).
                 w_em = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf, dr.detach(pdf_em)))
-                Ld = dr.select(em, beta * f_em * ls.L * (w_em / ls.pdf), 0.0)
+                Ld = dr.select(em, beta * f_em * ls.L * (w_em / pdf_Li), 0.0)
                 # A delta lobe cannot be evaluated toward a direction; its attached value
                 # is the sample's weight times the lobe's choice probability (e.g. the
                 # Fresnel reflectance of a smooth dielectric). A stochastic BSDF's eval
@@ -167,8 +210,8 @@ class PathIntegrator(SamplingIntegrator):
 
             beta[~skip] = beta * bs.weight
             eta[~skip] = eta * bs.eta
-            prev_p = mi.Point3f(si.p)
-            prev_n = mi.Normal3f(si.n)
+            prev_p = mi.Point3f(dr.detach(si.p))
+            prev_n = mi.Normal3f(dr.detach(si.n))
             prev_pdf = mi.Float(bs.pdf)
             prev_delta = skip | bs.delta
             ray = dr.select(skip, si.spawn_ray(ray.d), si.spawn_ray(si.to_world(bs.wo)))

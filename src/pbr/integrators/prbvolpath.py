@@ -49,6 +49,7 @@ class PRBVolPathIntegrator(_MediumAware):
 
     name = "prbvolpath"
     differentiable = True
+    geometry_gradients = True   # interior derivatives w.r.t. the geometry (see path)
 
     def __init__(self, props):
         super().__init__(props)
@@ -209,7 +210,8 @@ class PRBVolPathIntegrator(_MediumAware):
         n_null = mi.UInt32(0)
 
         while dr.hint(active, label="prbvolpath"):
-            si, shape = geo.intersect(ray, active)
+            # Replays differentiate the hit w.r.t. the geometry (it moves along the ray).
+            si, shape = geo.intersect(ray, active, attached=not primal)
             hit = si.is_valid()
             t_hit = dr.select(hit, si.t, dr.inf)
 
@@ -257,18 +259,20 @@ class PRBVolPathIntegrator(_MediumAware):
             # -- next-event estimation ---------------------------------------------------------
             ctx = ShadingContext(si, wl)
             nee = (rs & bsdfs.smooth(bsdf_id, rs)) | sc
-            ref = volume.nee_reference(si, sc, p_sc)
             u_light = rng.next_float32()
             u_pos = rng.next_2d()
             u1 = rng.next_float32()
             u2 = rng.next_2d()
             with dr.resume_grad(when=not primal):
+                ref = volume.nee_reference(si, sc, p_sc)   # attached: the hit may move
                 ls = lights.sample_Li(self.light_sampler, ref, u_light, u_pos, wl, nee)
                 wo_em = si.to_local(ls.wi)
                 f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs_sample)
                 if has_media:
                     f_em, pdf_em = volume.phase_nee(media, medium, ray, ls.wi, sc, f_em, pdf_em)
-                w_em = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf, dr.detach(pdf_em)))
+                # (MIS weight detached; the attached density carries the derivative of an
+                # area light sample's solid-angle measure when the shading point moves)
+                w_em = dr.select(ls.delta, 1.0, power_heuristic(dr.detach(ls.pdf), dr.detach(pdf_em)))
                 Ld_unocc = dr.select(nee & (ls.pdf > 0), beta * f_em * ls.L * (w_em / ls.pdf), 0.0)
                 f_sampled = bs.weight * bs.pdf     # delta lobes and stochastic BSDFs (see prb)
             replay_sample = bs.delta | bsdfs.stochastic(bsdf_id, rs)

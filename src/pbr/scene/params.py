@@ -10,13 +10,21 @@ Three kinds of keys (``flags(key)`` tells them apart, with Mitsuba's ``mi.ParamF
   scene's tables (which keeps the AD graph to the parameters).
 - geometry, Mitsuba's own keys of the shapes pbr hands to Mitsuba: ``<shape>.to_world``
   (rectangle, disk, sphere, cylinder), ``<mesh>.vertex_positions``, ``vertex_normals``,
-  ``vertex_texcoords``, ``faces``. ``update()`` lets Mitsuba rebuild the shapes and its
-  ray-tracing acceleration structure, then rebuilds pbr's tables (emissive shapes move
-  their lights). Not differentiable in pbr (a render with gradients on them is refused).
+  ``vertex_texcoords``, ``faces``, with Mitsuba's flags (positions and transforms are
+  differentiable and discontinuous; ``faces`` and the geometry of emissive shapes are not
+  differentiable in pbr). ``update()`` lets Mitsuba rebuild the shapes and its
+  ray-tracing acceleration structure (``parameters_changed``); moved vertices or
+  transforms then rebuild only the lights of emissive shapes and what the integrator
+  derives from the geometry (``Scene.geometry_changed``), other changes every table.
+  Derivatives: interior ones in ``path``/``prb``/``prbvolpath``, boundary ones (silhouettes,
+  shadows) in the projective integrators. Not inside ``pbr.freeze`` (Mitsuba rebuilds its
+  acceleration structure on the host, which a recording cannot replay).
 - the sensor: ``<sensor>.to_world`` (rigid), ``x_fov`` (degrees), ``near_clip``,
   ``far_clip``, ``principal_point_offset_x``/``_y``; the film's ``size``, ``crop_size``
   and ``crop_offset`` are read-only (load the scene with another film to change them).
-  Not differentiable in pbr.
+  Not differentiable in pbr, except a perspective camera's ``to_world`` (its pose: the
+  projective integrators differentiate it; the attached value is kept as the camera's
+  ``to_world_ad``).
 
 Mitsuba keys pbr does not have (documented exceptions): ``allow_thread_reordering``
 (a CUDA scheduling hint of Mitsuba's), ``<shape>.silhouette_sampling_weight`` (Mitsuba's
@@ -173,12 +181,19 @@ class _Param:
 
 
 class _GeometryParam(_Param):
-    """A key of Mitsuba's traversal of the geometry (``mp``: its ``SceneParameters``)."""
+    """A key of Mitsuba's traversal of the geometry (``mp``: its ``SceneParameters``),
+    with Mitsuba's flags (``vertex_positions`` and ``to_world`` are differentiable and
+    discontinuous, normals and uvs differentiable), except: ``faces``, and every key of an
+    emissive shape (pbr's area-light tables are built on the host), are not
+    differentiable."""
 
     kind = "geometry"
 
-    def __init__(self, mp, mkey, shape):
-        super().__init__(shape, mkey, _flags("NonDifferentiable"))
+    def __init__(self, mp, mkey, shape, emissive=False):
+        flags = int(mp.flags(mkey)) if hasattr(mp, "flags") else _flags("NonDifferentiable")
+        if emissive or mkey.endswith(".faces"):
+            flags = _flags("NonDifferentiable")
+        super().__init__(shape, mkey, flags)
         self.mp = mp
 
     def get(self):
@@ -186,7 +201,14 @@ class _GeometryParam(_Param):
 
     def set(self, key, value):
         if self.name.endswith(".to_world"):
-            value = variant_types().Transform4f(_matrix(value, key).tolist())
+            m = value.matrix if hasattr(value, "matrix") else value
+            if isinstance(m, dr.ArrayBase) and dr.is_jit_v(m):
+                value = variant_types().Transform4f(m)     # keeps its AD graph
+            else:
+                value = variant_types().Transform4f(_matrix(value, key).tolist())
+        elif self.flags & int(mi.ParamFlags.NonDifferentiable) and dr.grad_enabled(value):
+            raise ValueError(f"{key}: not differentiable in pbr (faces, and the geometry of emissive shapes, "
+                             f"whose light tables are built on the host): disable its gradients")
         self.mp[self.name] = value
 
 
@@ -198,11 +220,15 @@ class _SensorParam(_Param):
 
     def __init__(self, camera, name, read_only=False):
         flags = _flags("NonDifferentiable", "ReadOnly") if read_only else _flags("NonDifferentiable")
+        if name == "to_world" and hasattr(camera, "sample_ray_attached"):
+            flags = _flags("Discontinuous")   # a pinhole's pose: differentiable (projective integrators)
         super().__init__(camera, name, flags)
 
     def get(self):
         t, cam = variant_types(), self.owner
         if self.name == "to_world":
+            if cam.to_world_ad is not None:
+                return t.Transform4f(cam.to_world_ad)
             return t.Transform4f(np.asarray(cam.to_world, np.float64).tolist())
         if self.name.startswith("principal_point_offset_"):
             return t.Float(cam.pp["xy".index(self.name[-1])])
@@ -221,11 +247,17 @@ class _SensorParam(_Param):
     def set(self, key, value):
         cam = self.owner
         if self.name == "to_world":
-            m = _matrix(value, key)
+            mat = value.matrix if hasattr(value, "matrix") else value
+            attached = isinstance(mat, dr.ArrayBase) and dr.grad_enabled(mat)
+            if attached and self.flags & int(mi.ParamFlags.NonDifferentiable):
+                raise ValueError(f"{key}: the pose of a {type(cam).name!r} camera is not differentiable in pbr "
+                                 f"(a 'perspective' camera's is)")
+            m = _matrix(dr.detach(mat) if attached else value, key)
             lin = m[:3, :3]
             if not np.allclose(lin.T @ lin, np.eye(3), atol=1e-4):
                 raise ValueError(f"{key}: the camera-to-world transform must be rigid (no scale or shear)")
             cam.to_world = m
+            cam.to_world_ad = variant_types().Matrix4f(mat) if attached else None
             return
         try:
             v = float(np.asarray(value, np.float64).ravel()[0]) if not isinstance(value, (int, float)) else float(value)
@@ -281,10 +313,11 @@ class SceneParameters:
                 params[f"{owner.path}.{name}"] = _Param(owner, name)
         self._mp = mi.traverse(scene.mi_scene)
         shapes = {s.id(): s for s in scene.mi_scene.shapes()}
+        emissive = {str(scene.shape_ids[i]) for i in scene.top_level_shapes() if scene.shape_emitter[i]}
         for mkey in self._mp.keys():
             sid, _, name = mkey.rpartition(".")
             if name in GEOMETRY_KEYS and sid in shapes and mkey not in params:
-                params[mkey] = _GeometryParam(self._mp, mkey, shapes[sid])
+                params[mkey] = _GeometryParam(self._mp, mkey, shapes[sid], sid in emissive)
         self._params = params
         self._dirty: set[str] = set()
         self._geometry_read = False
@@ -354,7 +387,7 @@ class SceneParameters:
         """Keep only the keys that match ``keys``: a regular expression (matched at the start
         of the key, as ``re.match``), a list of them, or None for the differentiable keys."""
         if keys is None:
-            kept = [k for k, p in self._params.items() if p.flags == DIFFERENTIABLE]
+            kept = [k for k, p in self._params.items() if not p.flags & int(mi.ParamFlags.NonDifferentiable)]
         else:
             regexps = [re.compile(k).match for k in (keys if isinstance(keys, (list, tuple)) else [keys])]
             kept = [k for k in self._params if any(r(k) for r in regexps)]
@@ -409,13 +442,13 @@ class SceneParameters:
             raise RuntimeError(
                 f"params.update(): {', '.join(sorted(geometry + sensors))} cannot be updated inside a "
                 "dr.freeze-recorded function (a recording replays the geometry and camera it saw)")
-        rebuild = False
+        rebuild, moved = False, []
         if geometry or (self._geometry_read and not freezing):
             dr.eval()                           # kernels that reference the old geometry
             for obj, names in self._mp.update():
                 if obj is not self.scene.mi_scene:
                     changed.setdefault(id(obj), (obj, set()))[1].update(names)
-                rebuild = True
+                    moved.append((obj, set(names)))
             self._geometry_read = False
         if not rebuild and (pbr_keys or not dirty):
             rebuild = not self._refresh_values(pbr_keys) if pbr_keys else True
@@ -428,6 +461,8 @@ class SceneParameters:
                     "(constant or bitmap, e.g. '<bsdf>.reflectance.value' / '.data') and a BSDF's "
                     "'eta' can be updated")
             self.scene.build()
+        elif moved:
+            self.scene.geometry_changed(moved)
         self._dirty.clear()
         return list(changed.values())
 
@@ -453,10 +488,11 @@ class SceneParameters:
 
     # -- internal -----------------------------------------------------------------------
     def differentiable_values(self) -> dict:
-        """key -> value of the kept differentiable parameters that have gradients enabled."""
+        """key -> value of the kept differentiable parameters that have gradients enabled
+        (pbr's and the geometry's)."""
         out = {}
         for k, p in self._params.items():
-            if p.kind == "pbr":
+            if p.kind in ("pbr", "geometry", "sensor") and not p.flags & int(mi.ParamFlags.NonDifferentiable):
                 v = p.get()
                 if dr.grad_enabled(v):
                     out[k] = v

@@ -86,6 +86,24 @@ class Scene:
                     cam.min_differentials()
         self.integrator.prepare(self)
 
+    # Mitsuba's keys whose change leaves everything but the shapes' positions as it was.
+    MOVING_KEYS = frozenset({"vertex_positions", "vertex_normals", "to_world"})
+
+    def geometry_changed(self, moved: list) -> None:
+        """After Mitsuba rebuilt the shapes of ``moved`` ((shape, changed key names) pairs)
+        and its acceleration structure: rebuild what depends on them, not the whole
+        scene. Moved vertices or transforms change only the lights of emissive shapes
+        (their triangle tables) and what the integrator derives from the geometry
+        (``prepare``); other changes (faces, uvs) rebuild every table."""
+        if not all(names <= self.MOVING_KEYS for _, names in moved):
+            self.build()
+            return
+        emissive = {str(self.shape_ids[i]) for i in self.top_level_shapes() if self.shape_emitter[i]}
+        if any(obj.id() in emissive for obj, _ in moved):
+            self.lights.build(self)
+            own_table_memory(self)
+        self.integrator.prepare(self)
+
     @property
     def spp(self) -> int:
         """Samples per pixel requested by the first sensor's sampler."""
@@ -120,7 +138,16 @@ class Scene:
         return self.mi_scene.bbox()
 
     def requires_grad(self) -> bool:
-        return any(dr.grad_enabled(v) for t in self.param_owners() for v in t.params.values())
+        """Whether a parameter (pbr's, a shape's geometry) has gradients enabled."""
+        return (any(dr.grad_enabled(v) for t in self.param_owners() for v in t.params.values())
+                or self.geometry_requires_grad())
+
+    def geometry_requires_grad(self) -> bool:
+        """Whether a shape's geometry (vertices, transform) or a camera's pose has
+        gradients enabled."""
+        return (any(s.parameters_grad_enabled() for s in self.mi_scene.shapes())
+                or any(getattr(c, "to_world_ad", None) is not None and dr.grad_enabled(c.to_world_ad)
+                       for c in self.sensors))
 
     def __repr__(self):
         w, h = self.sensors[0].film.size

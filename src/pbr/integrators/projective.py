@@ -1,0 +1,668 @@
+"""``prb_projective`` and ``direct_projective``: derivatives w.r.t. geometry with the
+boundary terms that visibility discontinuities contribute.
+
+A pixel is an integral over the film, and the light reflected at a point an integral
+over directions; when a shape moves, the silhouettes of the shapes move across these
+domains and the integrands jump there. The derivative is then the interior part (the
+``prb`` replay with hits that move with the shapes) plus, for each discontinuity, an
+integral along the moving boundary of (the jump of the integrand) x (the boundary's
+normal velocity) (Li et al. 2018, "Differentiable Monte Carlo Ray Tracing through Edge
+Sampling"; Zhang et al. 2023, "Projective Sampling for Differentiable Rendering of
+Geometry", whose integrators these follow in name and parameters). pbr estimates two such
+boundaries by sampling points on silhouette edges of triangle meshes:
+
+* **primary visibility** (``sppp`` samples per pixel): the edges that are silhouettes
+  from the pinhole, projected onto the film; an edge is chosen in proportion to its
+  projected length and a point uniformly on it. The jump is the radiance just beside the
+  projected edge on either side (two camera rays, the integrator's own estimator with the
+  same random numbers), weighted by the pixel filter of each pixel the point falls on.
+* **visibility at the first surface hit** (``sppi`` samples per pixel): from a camera
+  path's first hit x, a point y on an edge, chosen by resampled importance sampling among
+  24 candidates drawn by edge length (target: the edge measure below where the edge is a
+  silhouette seen from x, larger toward emitters); the jump is f(x, w) L_i(x, w) just beside the
+  direction w = (y - x) / |y - x| on either side (L_i: the rest of the path, by the
+  integrator's estimator with one segment fewer), the normal velocity is that of the
+  direction, ((v_y - v_x) . n) / |y - x|, and the measure along the edge |e x w| / |y - x|.
+  This covers shadows of area and environment lights and, in ``prb_projective``, every
+  discontinuity of the light reaching x (indirect visibility at the first bounce).
+
+Edges (:class:`EdgeSet`): those of every triangle mesh (Mitsuba's ``cube`` included) and the
+four sides of every ``rectangle``. Vertices with equal positions are welded first, so a
+split-vertex mesh has the silhouettes of the watertight surface it represents (Mitsuba's
+own projective integrators count the seams of its ``cube`` as silhouettes and double them);
+edges between coplanar faces are never silhouettes and are dropped. An edge is a
+silhouette seen from a point p when its two faces' third vertices lie on the same side of
+the plane through p and the edge; boundary edges (one face) always are. The welded
+positions are the mean of the split copies (attached), so a vertex's gradient is shared
+among its copies.
+
+Interior derivatives are ``prb``'s, with light samples in solid angle (the direction
+toward an area light is fixed when the shading point moves), which is the measure the
+first-hit boundary term is written in. Not handled (documented in docs/inverse.md):
+boundaries of analytic shapes other than rectangles (sphere, disk, cylinder: use a mesh),
+discontinuities after the first bounce, hard shadows of point and spot lights (their
+boundary lies on the receiver, not in a direction), non-pinhole cameras, and guiding
+(``guiding`` and its options are accepted and ignored).
+
+A perspective camera's pose (``<sensor>.to_world`` assigned with gradients) is
+differentiated too: the replay's first segment follows the attached camera rays, the
+primary term projects edges with the attached pose, and the first-hit term starts from
+the attached hit.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from .. import spectrum as spec
+from ..bsdfs.base import ShadingContext
+from ..plugins.props import SceneError
+from ..samplers import IndependentSampler, IndependentStream, seed_array
+from ..spectrum import SampledWavelengths
+from .base import (BACKWARD, FORWARD, INTEGRATORS, PRIMAL, forward_derivative,
+                   max_samples_per_pass)
+from .path import PathIntegrator
+
+# Offset beside an edge at which the two sides' radiance is estimated: a fraction of a
+# pixel (primary visibility) and an angle (radians) at the first hit.
+PIXEL_EPS = 1e-3
+ANGLE_EPS = 1e-4
+# Two faces are coplanar (their edge is never a silhouette) below this |sin| of the angle
+# between the fourth vertex and the first face's plane.
+COPLANAR = 1e-6
+# Relative probability of edges that are silhouettes seen from an emitter's vertices.
+LIGHT_BOOST = 16.0
+# First-hit term: candidate edge points per sample (resampled importance sampling), and the
+# target's weight of directions that do not point at an emitter (x10 in prb_projective,
+# whose jumps may come from indirect light).
+CANDIDATES = 24
+CONE_FLOOR = 0.02
+
+
+def _weld(pos: np.ndarray):
+    """(welded index per vertex, number of welded vertices, count per welded vertex) for
+    vertex positions ``pos`` (n, 3): vertices with bit-equal positions become one."""
+    _, inv, counts = np.unique(pos, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
+    return inv, len(counts), counts
+
+
+def _mesh_edges(faces: np.ndarray, pos: np.ndarray):
+    """Edges of a welded triangle mesh: (a, b, c, d) vertex indices per edge (c, d: the
+    third vertices of its faces; d = -1 for a boundary edge), coplanar interior edges
+    dropped. Non-manifold edges (3+ faces) are kept once per face, as boundary edges."""
+    a = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
+    b = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
+    c = np.concatenate([faces[:, 2], faces[:, 0], faces[:, 1]])
+    ok = a != b
+    a, b, c = a[ok], b[ok], c[ok]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    key = lo.astype(np.int64) * (int(pos.shape[0]) + 1) + hi
+    order = np.argsort(key, kind="stable")
+    key, lo, hi, c = key[order], lo[order], hi[order], c[order]
+    start = np.r_[0, np.flatnonzero(np.diff(key)) + 1]
+    count = np.diff(np.r_[start, len(key)])
+    two = start[count == 2]
+    # boundary edges (one face) and non-manifold ones (3+ faces: each face's copy)
+    other = np.repeat(count != 2, count)
+    ea = np.concatenate([lo[two], lo[other]]).astype(np.int64)
+    eb = np.concatenate([hi[two], hi[other]]).astype(np.int64)
+    ec = np.concatenate([c[two], c[other]]).astype(np.int64)
+    ed = np.concatenate([c[two + 1], np.full(int(other.sum()), -1)]).astype(np.int64)
+    # drop interior edges between coplanar faces
+    inner = ed >= 0
+    pa, pb, pc = pos[ea], pos[eb], pos[ec]
+    pd = pos[np.where(inner, ed, ec)]
+    n = np.cross(pb - pa, pc - pa)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+    off = np.abs(np.einsum("ij,ij->i", n, pd - pa)) / np.maximum(np.linalg.norm(pd - pa, axis=1), 1e-30)
+    keep = ~inner | (off > COPLANAR)
+    return ea[keep], eb[keep], ec[keep], ed[keep]
+
+
+class EdgeSet:
+    """The candidate silhouette edges of a scene (see the module docstring): topology built
+    once per geometry, positions gathered (attached) from the shapes' current vertex
+    buffers by :meth:`positions`."""
+
+    def __init__(self, scene):
+        geo = scene.geometry
+        self.meshes, self.rects = [], []   # (mi shape, target index array, n values) / (mi shape)
+        a, b, c, d = [], [], [], []
+        n_vert = 0
+        counts = []
+        emitting = []    # welded vertex ranges of emissive shapes (see edge_weights)
+        for i in scene.top_level_shapes():
+            shape = geo.mi_shape(i)
+            first = n_vert
+            if shape.is_mesh():
+                pos = np.array(dr.detach(shape.vertex_positions_buffer()), dtype=np.float32).reshape(-1, 3)
+                faces = np.array(shape.faces_buffer(), dtype=np.int64).reshape(-1, 3)
+                inv, n_w, cnt = _weld(pos)
+                wpos = np.zeros((n_w, 3))
+                np.add.at(wpos, inv, pos)
+                wpos /= cnt[:, None]
+                ea, eb, ec, ed = _mesh_edges(inv[faces], wpos)
+                target = ((inv + n_vert)[:, None] * 3 + np.arange(3)[None, :]).ravel()
+                self.meshes.append((shape, mi.UInt32(target.astype(np.uint32))))
+                for lst, e in zip((a, b, c, d), (ea, eb, ec, ed)):
+                    lst.append(np.where(e >= 0, e + n_vert, -1))
+                counts.append(cnt)
+                n_vert += n_w
+            elif shape.shape_type() == int(mi.ShapeType.Rectangle):
+                # (Mitsuba 3.9's rectangles are meshes and take the branch above; this is
+                # for a rectangle without triangles.) Corners (-1,-1), (1,-1), (1,1),
+                # (-1,1) of the local square: four boundary edges.
+                self.rects.append((shape, n_vert))
+                for k in range(4):
+                    a.append(np.array([n_vert + k])); b.append(np.array([n_vert + (k + 1) % 4]))
+                    c.append(np.array([n_vert + (k + 2) % 4])); d.append(np.array([-1]))
+                counts.append(np.ones(4))
+                n_vert += 4
+            if scene.shape_emitter[i] and n_vert > first:
+                emitting.append((first, n_vert))
+        self.n_vertices = n_vert
+        self.emitting = emitting
+        self.count = len(np.concatenate(a)) if a else 0
+        if not self.count:
+            return
+        a, b, c, d = (np.concatenate(x) for x in (a, b, c, d))
+        self.a, self.b, self.c = (mi.UInt32(x.astype(np.uint32)) for x in (a, b, c))
+        self.has_d = mi.Bool(d >= 0)
+        self.d = mi.UInt32(np.maximum(d, 0).astype(np.uint32))
+        self.inv_count = mi.Float(np.repeat(1.0 / np.concatenate(counts), 3).astype(np.float32))
+
+    def positions(self) -> mi.Float:
+        """Welded vertex positions (flat x, y, z), attached to the shapes' parameters."""
+        acc = dr.zeros(mi.Float, 3 * self.n_vertices)
+        for shape, target in self.meshes:
+            dr.scatter_reduce(dr.ReduceOp.Add, acc, shape.vertex_positions_buffer(), target)
+        corners = ((-1, -1), (1, -1), (1, 1), (-1, 1))
+        for shape, first in self.rects:
+            T = mi.traverse(shape)["to_world"]
+            for k, (x, y) in enumerate(corners):
+                p = T @ mi.Point3f(x, y, 0.0)
+                for j in range(3):
+                    dr.scatter(acc, p[j], mi.UInt32(3 * (first + k) + j))
+        return acc * self.inv_count
+
+    def gather(self, P, k, active):
+        """(a, b, c, d, has_d) of edges ``k`` from welded positions ``P``."""
+        g = lambda idx: dr.gather(mi.Point3f, P, dr.gather(mi.UInt32, idx, k, active), active)  # noqa: E731
+        return g(self.a), g(self.b), g(self.c), g(self.d), dr.gather(mi.Bool, self.has_d, k, active)
+
+
+def _edge_measure(x, a, b, y):
+    """(|e x w| |e| / |y - x|: the solid-angle length swept per unit of the edge
+    parameter at edge point y seen from x, the unit direction w from x to y)."""
+    v = y - x
+    r = dr.norm(v)
+    w = v / r
+    e = b - a
+    meas = dr.norm(dr.cross(w, e)) / r
+    return dr.select(r > 0, meas, 0.0), w
+
+
+def silhouette(p, a, b, c, d, has_d):
+    """Whether edge (a, b) with faces' third vertices c, d is a silhouette seen from p."""
+    n = dr.cross(a - p, b - p)
+    sc, sd = dr.dot(n, c - p), dr.dot(n, d - p)
+    return ~has_d | (sc * sd > 0)
+
+
+@INTEGRATORS.register("prb_projective")
+class ProjectivePathIntegrator(PathIntegrator):
+    """``prb_projective`` (Mitsuba's name and parameters): ``prb``'s path tracer whose
+    derivatives w.r.t. geometry (mesh vertices, shape ``to_world``) include the boundary
+    terms of primary visibility and of visibility at the first surface hit, estimated by
+    sampling silhouette edges (see docs/inverse.md, "Geometry"). Primal images are
+    ``prb``'s.
+
+    =============  ======  =======  ==============================================================
+    name           type    default  meaning
+    =============  ======  =======  ==============================================================
+    max_depth      int     -1       longest path in segments (Mitsuba's meaning)
+    rr_depth       int     5        depth from which Russian roulette may end a path
+    hide_emitters  bool    false    camera rays pass through emitting surfaces
+    light_sampler  string  bvh      light choice of next-event estimation
+    sppc           int     -        samples per pixel of the interior derivative: 0 disables it;
+                                    otherwise the render's spp_grad (or spp) wins, then this
+                                    value, then the sensor's sample count (Mitsuba's rule)
+    sppp           int     -        the same for the primary-visibility boundary term
+    sppi           int     -        the same for the first-hit visibility boundary term
+    guiding        string  octree   Mitsuba's guiding of indirect-boundary samples: accepted and
+                                    ignored ('none', 'grid', 'octree'; pbr chooses edges by length)
+    guiding_proj   bool    true     accepted and ignored (Mitsuba's guiding option)
+    guiding_rounds int     1        accepted and ignored (Mitsuba's guiding option)
+    proj_seed_spp  int     0        accepted and ignored (Mitsuba's projection seeds)
+    =============  ======  =======  ==============================================================
+    """
+
+    name = "prb_projective"
+    default_max_depth = -1
+    hide_through_null = False
+    solid_angle_nee = True
+    camera_gradients = True   # a perspective camera's pose (sensor to_world)
+
+    def __init__(self, props):
+        # prb's parameters, then Mitsuba's projective ones (props finished here)
+        PathIntegrator.__init__(self, _Unfinished(props))
+        self.spp_c, self.spp_p, self.spp_i = (props.int(k, min=0) if props.has(k) else None
+                                              for k in ("sppc", "sppp", "sppi"))
+        props.string("guiding", "octree", choices=("none", "grid", "octree"))
+        props.bool("guiding_proj", True)
+        props.int("guiding_rounds", 1, min=1)
+        props.int("proj_seed_spp", 0, min=0)
+        self._extra(props)
+        props.finish()
+
+    def _extra(self, props) -> None:
+        """Subclasses read their own parameters here."""
+
+    # -- set-up -----------------------------------------------------------------------------
+    def prepare(self, scene, sensor: int = 0) -> None:
+        super().prepare(scene, sensor)
+        key = (id(scene.mi_scene), tuple(len(s.faces_buffer()) if s.is_mesh() else 0 for s in scene.mi_scene.shapes()))
+        if getattr(self, "_edges_key", None) != key:
+            self.edges = EdgeSet(scene)
+            self._edges_key = key
+
+    # -- derivatives: interior + boundaries -------------------------------------------------------
+    @staticmethod
+    def _scene_emissive_shapes(scene):
+        return [i for i in scene.top_level_shapes() if scene.shape_emitter[i]]
+
+    def _warn_uncovered(self, scene) -> None:
+        """Warn (once per shape) about shapes with gradients whose silhouettes pbr does
+        not sample (analytic shapes: their boundary terms are missing)."""
+        warned = self.__dict__.setdefault("_warned", set())
+        for shape in scene.mi_scene.shapes():
+            if shape.parameters_grad_enabled() and not shape.is_mesh() and shape.id() not in warned:
+                warned.add(shape.id())
+                warnings.warn(f"{self.name}: shape {shape.id()!r} is not a triangle mesh; its silhouettes are not "
+                              f"sampled, so the boundary part of its derivative is missing (use a mesh, e.g. an "
+                              f"'obj' or 'ply' sphere)", RuntimeWarning, stacklevel=4)
+
+    def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0, sample=None):
+        self._warn_uncovered(scene)
+        n_c, n_p, n_i = self._counts(scene, sensor, spp)
+        if n_c:
+            super().render_backward(scene, grad_img, sensor, seed, n_c)
+        else:
+            self.prepare(scene, sensor)
+        if not self.edges.count:
+            return
+        g = grad_img.array if isinstance(grad_img, mi.TensorXf) else mi.Float(np.asarray(grad_img, np.float32).ravel())
+        if n_p:
+            self._primary(scene, sensor, seed, n_p, BACKWARD, g)
+        if n_i:
+            self._distr = self._edge_distribution(scene, dr.detach(self.edges.positions()))
+            super().render_backward(scene, grad_img, sensor, _mix(seed, 2), n_i, sample=self._first_hit_boundary)
+
+    def render_forward(self, scene, sensor=0, seed=0, spp=0, sample=None):
+        self._warn_uncovered(scene)
+        n_c, n_p, n_i = self._counts(scene, sensor, spp)
+        if n_c:
+            img = super().render_forward(scene, sensor, seed, n_c)
+        else:
+            self.prepare(scene, sensor)
+            w, h = scene.sensors[sensor].film.size
+            img = dr.zeros(mi.TensorXf, (h, w, 3))
+        if not self.edges.count:
+            return img
+        if n_p:
+            img = img + self._primary(scene, sensor, seed, n_p, FORWARD, None)
+        if n_i:
+            self._distr = self._edge_distribution(scene, dr.detach(self.edges.positions()))
+            img = img + super().render_forward(scene, sensor, _mix(seed, 2), n_i, sample=self._first_hit_boundary)
+        return img
+
+    def _counts(self, scene, sensor, spp):
+        """(sppc, sppp, sppi) of a derivative pass, by Mitsuba's rule: a count set to 0
+        disables its term; otherwise the render's spp (spp_grad) wins, then the count
+        given here, then the sensor's sampler."""
+        sampler_spp = scene.sensors[sensor].sampler.sample_count
+        out = []
+        for n in (self.spp_c, self.spp_p, self.spp_i):
+            out.append(0 if n == 0 else (int(spp) if spp else (n if n is not None else sampler_spp)))
+        return tuple(out)
+
+    # -- primary visibility -----------------------------------------------------------------------
+    def _primary(self, scene, sensor, seed, spp, mode, g):
+        """The primary-visibility boundary term: reverse mode propagates it (``g``: the
+        image adjoint, flat); forward mode returns its image."""
+        self.prepare(scene, sensor)
+        cam = scene.sensors[sensor]
+        if type(cam).name != "perspective":
+            raise SceneError(f"{self.path}: the primary-visibility boundary of {self.name!r} needs a 'perspective' "
+                             f"camera (sensor {sensor} is {type(cam).name!r})")
+        w, h = cam.film.size
+        rf = cam.film.rfilter
+        proj = _Projection(cam, w, h)
+        edges = self.edges
+        with dr.suspend_grad():
+            P = dr.detach(edges.positions())
+            k_all = dr.arange(mi.UInt32, edges.count)
+            a, b, c, d, has_d = edges.gather(P, k_all, True)
+            sil = silhouette(proj.o, a, b, c, d, has_d)
+            za, zb = proj.depth(a), proj.depth(b)
+            front = (za > cam.near_clip) & (zb > cam.near_clip)
+            length = dr.norm(proj.pixel(a) - proj.pixel(b))
+            pmf_w = dr.select(sil & front & dr.isfinite(length), length, 0.0)
+            total = float(dr.sum(pmf_w)[0])
+        if not total > 0.0:
+            return None if mode == BACKWARD else dr.zeros(mi.TensorXf, (h, w, 3))
+        distr = mi.DiscreteDistribution(pmf_w)
+        n = w * h * spp
+        fx, fy = _filter_norms(rf, w), _filter_norms(rf, h)
+        per_pass = max(1, min(n, max_samples_per_pass()))
+        acc = dr.zeros(mi.Float, w * h * 3) if mode == FORWARD else None
+        for first in range(0, n, per_pass):      # passes of bounded memory
+            acc = self._primary_pass(scene, cam, proj, edges, P, distr, fx, fy, n, first, min(per_pass, n - first),
+                                     seed, mode, g, acc)
+            dr.eval(acc) if acc is not None else dr.eval()
+        if mode == BACKWARD:
+            return None
+        with dr.suspend_grad():
+            pixel = dr.arange(mi.UInt32, w * h)
+            rgb = spec.xyz_to_srgb(mi.Array3f([dr.gather(mi.Float, acc, pixel * 3 + ch) for ch in range(3)]))
+            out = dr.zeros(mi.Float, w * h * 3)
+            for ch in range(3):
+                dr.scatter(out, rgb[ch], pixel * 3 + ch)
+            return mi.TensorXf(out, (h, w, 3))
+
+    def _primary_pass(self, scene, cam, proj, edges, P, distr, fx, fy, n, first, count, seed, mode, g, acc):
+        """Samples ``first`` .. ``first + count`` of the ``n`` of the primary term."""
+        w, h = cam.film.size
+        rf = cam.film.rfilter
+        with dr.suspend_grad():
+            idx = dr.arange(mi.UInt32, count) + dr.opaque(mi.UInt32, first)
+            rng = IndependentStream(rng=IndependentSampler.make_rng(idx, seed_array(_mix(seed, 1))))
+            wl = SampledWavelengths.sample_visible(rng.next_float32())
+            k, pmf = distr.sample_pmf(rng.next_float32())
+            t = rng.next_float32()
+            a, b, c, d, has_d = edges.gather(P, k, True)
+            y = dr.fma(b - a, t, a)
+            x, dx = proj.pixel(y), proj.pixel_dt(a, b - a, t)
+            speed = dr.norm(dx)
+            nrm = mi.Vector2f(-dx.y, dx.x) / speed
+            # the image integrates over the film only (samples outside it are dropped)
+            ok = (pmf > 0) & (speed > 0) & (x.x >= 0) & (x.x < w) & (x.y >= 0) & (x.y < h)
+            weight = dr.select(ok, speed / (pmf * n), 0.0)
+            L = []
+            self.face_first_hit = True       # past the rim of interpolated normals (face_the_ray)
+            try:
+                for sgn in (-1.0, 1.0):
+                    q = x + nrm * (sgn * PIXEL_EPS)
+                    ray = cam.sample_ray(mi.Point2f(q.x / w, q.y / h))
+                    r2 = rng.copy()
+                    L.append(self.sample(scene, r2, ray, wl, PRIMAL, None, None, ok)[0])
+            finally:
+                self.face_first_hit = False
+            xyz = spec.to_xyz(L[0] - L[1], wl) * weight
+            ok &= dr.all(dr.isfinite(xyz))
+            xyz = dr.select(ok, xyz, 0.0)
+            R = int(math.ceil(rf.radius - 0.5))
+            base = mi.Int32(dr.floor(x.x)), mi.Int32(dr.floor(x.y))
+            taps = []
+            for i in range(-R - 1, R + 2):
+                for j in range(-R - 1, R + 2):
+                    px, py = base[0] + i, base[1] + j
+                    inside = ok & (px >= 0) & (px < w) & (py >= 0) & (py < h)
+                    norm = dr.gather(mi.Float, fx, mi.UInt32(px), inside) * dr.gather(mi.Float, fy, mi.UInt32(py), inside)
+                    fw = rf.eval(x.x - (mi.Float(px) + 0.5)) * rf.eval(x.y - (mi.Float(py) + 0.5)) * dr.rcp(norm)
+                    inside &= fw != 0
+                    taps.append((mi.UInt32(py * w + px), fw, inside))
+        with dr.resume_grad():
+            Pa = edges.positions()
+            aa, ba, _, _, _ = edges.gather(Pa, k, ok)
+            proj_ad = _Projection(cam, w, h, attached=True) if cam.to_world_ad is not None else proj
+            vn = dr.dot(proj_ad.pixel(dr.fma(ba - aa, t, aa)), dr.detach(nrm))
+        if mode == BACKWARD:
+            with dr.suspend_grad():
+                g_xyz = mi.Array3f(0.0)
+                for pix, fw, inside in taps:
+                    gr = mi.Array3f([dr.gather(mi.Float, g, pix * 3 + ch, inside) for ch in range(3)])
+                    g_xyz += spec.srgb_to_xyz_adjoint(gr) * dr.select(inside, fw, 0.0)
+                s = dr.dot(xyz, g_xyz)
+            with dr.resume_grad():
+                dr.backward_from(s * vn, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
+            return None
+        with dr.resume_grad():
+            dv = dr.forward_to(vn, flags=dr.ADFlag.ClearInterior | dr.ADFlag.AllowNoGrad)
+        with dr.suspend_grad():
+            val = xyz * dv
+            for pix, fw, inside in taps:
+                for ch in range(3):
+                    dr.scatter_reduce(dr.ReduceOp.Add, acc, val[ch] * fw, pix * 3 + ch, inside)
+        return acc
+
+    # -- visibility at the first hit -----------------------------------------------------------------
+    def _first_hit_boundary(self, scene, rng, ray, wl, mode, dL, L_in, active):
+        """Per camera sample, the boundary term of the light reflected at the first hit
+        (an estimator with the ``sample`` interface: zero in PRIMAL mode)."""
+        if mode == PRIMAL:
+            return mi.Spectrum(0.0), mi.Bool(active)
+        edges, geo, bsdfs = self.edges, scene.geometry, scene.bsdfs
+        si, shape = geo.intersect(ray, active, attached=True, ray_ad=self.primary_ray_ad)
+        hit = active & si.is_valid()
+        bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
+        on = hit & bsdfs.smooth(bsdf_id, hit) & (self.max_depth < 0 or self.max_depth > 1)
+        P = dr.detach(edges.positions())
+        x = dr.detach(si.p)
+        # Resampled importance sampling (RIS) of the edge point: CANDIDATES points drawn by
+        # edge length, one kept in proportion to target / pmf, the target being the edge
+        # measure of a silhouette point times (floor + 1 if its direction points at an
+        # emitter's bounding sphere); estimate = h / target * mean(target / pmf).
+        floor = CONE_FLOOR if self.max_depth == 2 else 10 * CONE_FLOOR
+        wsum = mi.Float(0.0)
+        k, t, target = mi.UInt32(0), mi.Float(0.0), mi.Float(0.0)
+        for _ in range(CANDIDATES):
+            k_i, pmf_i = self._distr.sample_pmf(rng.next_float32())
+            t_i = rng.next_float32()
+            a, b, c, d, has_d = edges.gather(P, k_i, on)
+            y = dr.fma(b - a, t_i, a)
+            meas, wdir = _edge_measure(x, a, b, y)
+            tgt = dr.select(on & silhouette(x, a, b, c, d, has_d), meas, 0.0) * (floor + self._toward_light(x, wdir))
+            w_i = dr.select(pmf_i > 0, tgt / pmf_i, 0.0)
+            wsum += w_i
+            take = rng.next_float32() * wsum < w_i
+            k, t, target = dr.select(take, k_i, k), dr.select(take, t_i, t), dr.select(take, tgt, target)
+        on &= target > 0
+        a, b, c, d, has_d = edges.gather(P, k, on)
+        y = dr.fma(b - a, t, a)
+        r = dr.norm(y - x)
+        wdir = (y - x) / r
+        cr = dr.cross(wdir, dr.normalize(b - a))
+        nw = cr / dr.norm(cr)
+        meas, _ = _edge_measure(x, a, b, y)
+        weight = dr.select(on, meas * wsum / (CANDIDATES * target), 0.0)
+        si_d = dr.detach(si)
+        ctx = ShadingContext(si_d, wl)
+        g = []
+        for sgn in (-1.0, 1.0):
+            wo = dr.normalize(wdir + nw * (sgn * ANGLE_EPS))
+            f, _ = bsdfs.eval_pdf(bsdf_id, ctx, si_d.to_local(wo), on)
+            r2 = rng.copy()
+            Li = self._incident(scene, r2, si_d.spawn_ray(wo), wl, on)
+            g.append(f * Li)
+        jump = dr.select(on, (g[0] - g[1]) * weight, 0.0)
+        with dr.resume_grad():
+            Pa = edges.positions()
+            aa, ba, _, _, _ = edges.gather(Pa, k, on)
+            vn = dr.dot(dr.fma(ba - aa, t, aa) - si.p, dr.detach(nw)) / dr.detach(r)
+            term = jump * vn
+            if mode == BACKWARD:
+                dr.backward_from(dL * term, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
+                return mi.Spectrum(0.0), mi.Bool(active)
+            return forward_derivative(term), mi.Bool(active)
+
+    def _toward_light(self, x, wdir):
+        """1 where direction ``wdir`` from ``x`` points into the bounding sphere of an
+        emissive shape (every direction with an environment light), else 0."""
+        if self._all_directions:
+            return mi.Float(1.0)
+        out = mi.Bool(False)
+        for cx, cy, cz, rad in self._spheres:
+            v = mi.Vector3f(cx, cy, cz) - x
+            dist2 = dr.squared_norm(v)
+            cos_max = dr.safe_sqrt(dr.maximum(1.0 - rad * rad / dr.maximum(dist2, 1e-30), 0.0))
+            out |= (dist2 <= rad * rad) | (dr.dot(v, wdir) >= cos_max * dr.sqrt(dist2))
+        return dr.select(out, 1.0, 0.0)
+
+    def _edge_distribution(self, scene, P):
+        """Edges for the first-hit term: in proportion to length, times ``LIGHT_BOOST`` for
+        the edges that are silhouettes seen from a vertex or the centroid of an emissive
+        shape (those that cast shadow boundaries of small lights). Every edge keeps a
+        nonzero probability, so the estimator stays unbiased; this is a cheap stand-in
+        for Mitsuba's guiding structures."""
+        edges = self.edges
+        with dr.suspend_grad():
+            k_all = dr.arange(mi.UInt32, edges.count)
+            a, b, c, d, has_d = edges.gather(P, k_all, True)
+            weight = dr.norm(b - a)
+            pts = np.array(P, dtype=np.float64).reshape(-1, 3)
+            self._spheres = []
+            for lo, hi in edges.emitting:
+                q = pts[lo:hi]
+                centre = q.mean(axis=0)
+                self._spheres.append((*centre.tolist(), float(np.linalg.norm(q - centre, axis=1).max()) * 1.001))
+            # emitters the edge table does not hold (environment, other shapes' lights):
+            # every direction may see light
+            held = len(self._scene_emissive_shapes(scene)) == len(edges.emitting)
+            self._all_directions = bool(scene.lights.has_infinite) or not held or not edges.emitting
+            if edges.emitting:
+                lights = [pts[lo:hi] for lo, hi in edges.emitting]
+                lights = np.concatenate(lights + [np.mean(x, axis=0, keepdims=True) for x in lights])
+                mark = mi.Bool(False)
+                for q in lights.tolist():
+                    mark |= silhouette(mi.Point3f(*q), a, b, c, d, has_d)
+                weight = weight * dr.select(mark, LIGHT_BOOST, 1.0)
+            return mi.DiscreteDistribution(weight)
+
+    def _incident(self, scene, rng, ray, wl, active):
+        """Radiance arriving along ``ray`` (the rest of a path: one segment fewer than
+        ``max_depth``; emitters visible)."""
+        saved = self.max_depth, self.hide_emitters
+        self.max_depth = saved[0] - 1 if saved[0] > 0 else saved[0]
+        self.hide_emitters, self.face_first_hit = False, True
+        try:
+            return PathIntegrator.sample(self, scene, rng, ray, wl, PRIMAL, None, None, active)[0]
+        finally:
+            self.max_depth, self.hide_emitters = saved
+            self.face_first_hit = False
+
+
+@INTEGRATORS.register("direct_projective")
+class DirectProjectiveIntegrator(ProjectivePathIntegrator):
+    """``direct_projective`` (Mitsuba's): direct illumination (``prb_projective`` with
+    ``max_depth`` 2) with the boundary terms of primary visibility and of shadows
+    (silhouettes between the first hit and the emitters).
+
+    =============  ======  =======  ==============================================================
+    name           type    default  meaning
+    =============  ======  =======  ==============================================================
+    max_depth      int     2        accepted and ignored (2: direct illumination, as Mitsuba's)
+    rr_depth       int     2        accepted and ignored
+    hide_emitters  bool    false    camera rays pass through emitting surfaces
+    light_sampler  string  bvh      light choice of next-event estimation
+    sppc           int     -        samples per pixel of the interior derivative (0: off; see
+                                    prb_projective for which count wins)
+    sppp           int     -        the same for the primary-visibility boundary term
+    sppi           int     -        the same for the shadow boundary term
+    guiding        string  octree   accepted and ignored (Mitsuba's guiding; 'none', 'grid',
+                                    'octree')
+    guiding_proj   bool    true     accepted and ignored
+    guiding_rounds int     1        accepted and ignored
+    proj_seed_spp  int     0        accepted and ignored
+    project_seed   string  both     accepted and ignored (Mitsuba's: 'both', 'bsdf', 'emitter')
+    =============  ======  =======  ==============================================================
+    """
+
+    name = "direct_projective"
+    default_max_depth = 2
+
+    def _extra(self, props) -> None:
+        props.string("project_seed", "both", choices=("both", "bsdf", "emitter"))
+        self.max_depth, self.rr_depth = 2, 2   # direct illumination (Mitsuba overrides both too)
+
+
+class _Unfinished:
+    """A view of Props whose ``finish`` does nothing (the subclass reads more keys)."""
+
+    def __init__(self, props):
+        self._props = props
+
+    def finish(self):
+        pass
+
+    def __getattr__(self, name):
+        return getattr(self._props, name)
+
+
+class _Projection:
+    """A perspective camera's map from world points to pixel coordinates of its (cropped)
+    film, and the derivative along a segment (for the edge measure)."""
+
+    def __init__(self, cam, w, h, attached=False):
+        if attached:     # the camera pose with its gradients (cam.to_world_ad)
+            m = cam.to_world_ad
+            self.m = [[m[r][c] for c in range(4)] for r in range(4)]
+            self.o = mi.Point3f(m[0][3], m[1][3], m[2][3])
+        else:
+            m = np.asarray(cam.to_world, np.float64)
+            self.m = m.tolist()
+            self.o = mi.Point3f(*m[:3, 3].tolist())
+        tx = math.tan(math.radians(cam.x_fov) / 2)
+        sx, sy, ox, oy = cam._crop
+        self.kx, self.ky = -0.5 * w / (tx * sx), -0.5 * h * cam.aspect / (tx * sy)
+        self.cx = w / sx * (0.5 - cam.pp[0] - ox)
+        self.cy = h / sy * (0.5 - cam.pp[1] - oy)
+
+    def local(self, v):
+        m = self.m
+        return mi.Vector3f(*[m[0][k] * v.x + m[1][k] * v.y + m[2][k] * v.z for k in range(3)])
+
+    def depth(self, p):
+        return self.local(p - self.o).z
+
+    def pixel(self, p):
+        q = self.local(p - self.o)
+        inv = dr.rcp(q.z)
+        return mi.Point2f(dr.fma(self.kx, q.x * inv, self.cx), dr.fma(self.ky, q.y * inv, self.cy))
+
+    def pixel_dt(self, a, e, t):
+        """d pixel / dt of the point a + t e."""
+        A, D = self.local(a - self.o), self.local(e)
+        z = dr.fma(D.z, t, A.z)
+        X, Y = dr.fma(D.x, t, A.x), dr.fma(D.y, t, A.y)
+        inv2 = dr.rcp(z * z)
+        return mi.Vector2f(self.kx * (D.x * z - X * D.z) * inv2, self.ky * (D.y * z - Y * D.z) * inv2)
+
+
+def _filter_norms(rf, n: int) -> mi.Float:
+    """Per pixel index i < n along one film axis, the integral of the pixel filter over
+    the film, int_0^n f(x - i - 1/2) dx: the normalisation of pixel i's value (the film
+    drops samples outside it, so pixels at the border integrate a truncated filter)."""
+    xs = np.linspace(-rf.radius, rf.radius, 4001)
+    with dr.suspend_grad():
+        f = np.array(rf.eval(mi.Float(xs.astype(np.float32))), dtype=np.float64)
+    centres = np.arange(n) + 0.5
+    out = []
+    for c in centres:
+        inside = (xs + c >= 0) & (xs + c <= n)
+        g = np.where(inside, f, 0.0)
+        out.append(float(np.sum((g[1:] + g[:-1]) * np.diff(xs)) / 2))
+    return mi.Float(np.asarray(out, np.float32))
+
+
+def _mix(seed, k: int):
+    """A seed for the boundary passes, decorrelated from ``seed``."""
+    if isinstance(seed, int):
+        return (seed * 0x9E3779B1 + 0x632BE5AB * k) & 0xFFFFFFFF
+    return seed_array(seed) * 0x9E3779B1 + 0x632BE5AB * k
