@@ -118,7 +118,9 @@ EXCLUDED = {"ambientocclusion": "computes ambient occlusion, not radiance",
             "aov": "outputs AOV channels, not an estimate of radiance",
             "depth": "outputs distances, not radiance",
             "moment": "outputs moments of nested integrators (AOVs), not an estimate of radiance",
-            "prb": "path's estimator (its primal pass is path's kernel): same curve"}
+            "prb": "path's estimator (its primal pass is path's kernel): same curve",
+            "prb_projective": "path's primal estimator (it adds boundary terms to derivatives only): same curve",
+            "direct_projective": "path's primal estimator at max_depth 2 (boundary terms in derivatives only)"}
 BENCHED = UNBIASED + tuple(BIASED)
 REF_BATCHES = 16
 CACHE_VERSION = 1
