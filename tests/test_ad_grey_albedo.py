@@ -167,8 +167,10 @@ def test_black_emission_has_a_derivative():
     params = pbr.traverse(scene)
     key = "light.emitter.radiance.value"
     t = mi.Color3f(1.0, 1.0, 1.0)
-    fwd = forward_image(scene, params, key, t, spp=64).mean()
-    fd = fd_image(scene, params, key, t, 1.0, 64, seed=5, side=1).mean()
+    # 4096 spp (8x8 pixels): at 64 and 1024 the finite difference alone is ~6% and ~3%
+    # noisy, so the 5% test passed or failed with the seed; at 4096 they agree within 1.2%
+    fwd = forward_image(scene, params, key, t, spp=4096).mean()
+    fd = fd_image(scene, params, key, t, 1.0, 4096, seed=5, side=1).mean()
     assert fwd > 0 and abs(fwd - fd) < 0.05 * fd, (fwd, fd)
 
 
