@@ -202,8 +202,9 @@ class _Dielectric(BSDFType):
         disp = active & (si != _NO_TEXTURE)
         se = dr.gather(mi.UInt32, self.ext_slot, idx, disp)
         lam = ctx.wl.lambda_
-        ni = self.textures.eval(si, ctx.si, lam, disp, illuminant=False)[0]
-        ne = self.textures.eval(se, ctx.si, lam, disp, illuminant=False)[0]
+        reach = lambda k: tuple(i[k] for i in self.instances if i[k] != _NO_TEXTURE)  # noqa: E731
+        ni = self.textures.eval(si, ctx.si, lam, disp, illuminant=False, reach=reach("int_slot"))[0]
+        ne = self.textures.eval(se, ctx.si, lam, disp, illuminant=False, reach=reach("ext_slot"))[0]
         return dr.select(disp, ni / dr.maximum(ne, 1e-6), eta)
 
     def _terminates(self, idx, active):

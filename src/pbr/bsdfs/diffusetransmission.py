@@ -58,9 +58,10 @@ class DiffuseTransmission(BSDFType):
     def _albedos(self, ctx, idx, active):
         """(r, t), each clamped to [0, 1] after scaling, as in pbrt-v4."""
         out = []
-        for table in (self.reflectance, self.transmittance):
-            slot = dr.gather(mi.UInt32, table, idx, active)
-            v = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active, illuminant=False)
+        for name in ("reflectance", "transmittance"):
+            slot = dr.gather(mi.UInt32, getattr(self, name), idx, active)
+            v = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, active, illuminant=False,
+                                   reach=tuple(i[name] for i in self.instances))
             if self.any_scale:
                 v = v * dr.gather(mi.Float, self.scale, idx, active)
             out.append(dr.clip(v, 0.0, 1.0))

@@ -369,9 +369,16 @@ class _Layered(BSDFType):
 
     # -- per-hit parameters ---------------------------------------------------------
     def _tex(self, ctx, idx, active):
+        """A lookup of the parameter ``name`` (its slot table is ``self.<name>``, its
+        instances' slots ``inst[name]``): only the texture kinds those slots reach are
+        traced (a walk evaluates it at every step, unrolled for derivatives)."""
         tex, uv, lam = self.textures, ctx.si, ctx.wl.lambda_
-        return lambda table: tex.eval(dr.gather(mi.UInt32, table, idx, active), uv, lam, active,  # noqa: E731
-                                      illuminant=False)
+
+        def ev(name):
+            reach = tuple(i[name] for i in self.instances)
+            return tex.eval(dr.gather(mi.UInt32, getattr(self, name), idx, active), uv, lam, active,
+                            illuminant=False, reach=reach)
+        return ev
 
     def _alpha(self, ev, idx, tu, tv, active):
         remap = dr.gather(mi.Bool, self.remap, idx, active)
@@ -385,15 +392,16 @@ class _Layered(BSDFType):
         if self.dispersive:
             slot = dr.gather(mi.UInt32, self.eta_slot, idx, active)
             disp = active & (slot != _NONE)
-            e = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, disp, illuminant=False)[0]
+            e = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, disp, illuminant=False,
+                                   reach=tuple(i["eta_slot"] for i in self.instances if i["eta_slot"] != _NONE))[0]
             eta = dr.select(disp, dr.select(e == 0, 1.0, e), eta)
             terminate = disp
-        top = _Top(eta, *self._alpha(ev, idx, self.top_u, self.top_v, active), self.top_kind)
+        top = _Top(eta, *self._alpha(ev, idx, "top_u", "top_v", active), self.top_kind)
         # Numerical clamps of checked values: the derivative at a bound passes.
-        thick = clamp_keep_grad(ev(self.thickness)[0], _FLT_MIN)
+        thick = clamp_keep_grad(ev("thickness")[0], _FLT_MIN)
         if self.medium:
-            albedo = clamp_keep_grad(ev(self.albedo), 0.0, 1.0)
-            g = clamp_keep_grad(ev(self.g)[0], -1.0, 1.0)
+            albedo = clamp_keep_grad(ev("albedo"), 0.0, 1.0)
+            g = clamp_keep_grad(ev("g")[0], -1.0, 1.0)
             medium = dr.any(albedo > 0)
         else:
             albedo, g, medium = mi.Spectrum(0.0), mi.Float(0.0), mi.Bool(False)
@@ -670,7 +678,7 @@ class CoatedDiffuse(_Layered):
         self.reflectance = mi.UInt32([i["reflectance"] for i in self.instances])
 
     def _base(self, ev, idx, eta, active):
-        return _DiffuseBase(clamp_keep_grad(ev(self.reflectance), 0.0, 1.0))
+        return _DiffuseBase(clamp_keep_grad(ev("reflectance"), 0.0, 1.0))
 
 
 def _metal(loader, name: str, comp: str, path: str) -> int:
@@ -747,14 +755,14 @@ class CoatedConductor(_Layered):
         if self.refl_modes == {True}:
             ce = ck = None
         else:
-            ce, ck = ev(self.ce), ev(self.ck)
+            ce, ck = ev("ce"), ev("ck")
         if True in self.refl_modes:
-            r = dr.clip(ev(self.ce), 0.0, 0.9999)
+            r = dr.clip(ev("ce"), 0.0, 0.9999)
             rk = 2.0 * dr.sqrt(r) / dr.sqrt(1.0 - r)
             if ce is None:
                 ce, ck = mi.Spectrum(1.0), rk
             else:
                 use = dr.gather(mi.Bool, self.use_refl, idx, active)
                 ce, ck = dr.select(use, 1.0, ce), dr.select(use, rk, ck)
-        au, av = self._alpha(ev, idx, self.cu, self.cv, active)
+        au, av = self._alpha(ev, idx, "cu", "cv", active)
         return _ConductorBase(ce / eta, ck / eta, au, av, self.base_kind)

@@ -243,7 +243,8 @@ class DeltaPositionLight(LightType):
 
     def _intensity(self, idx, wl, active):
         slot = dr.gather(mi.UInt32, self.slot, idx, active)
-        return self.textures.eval(slot, mi.Point2f(0.5), wl.lambda_, active) * dr.gather(mi.Float, self.factor, idx, active)
+        return self.textures.eval(slot, mi.Point2f(0.5), wl.lambda_, active,
+                                  reach=tuple(int(i["slot"]) for i in self.instances)) * dr.gather(mi.Float, self.factor, idx, active)
 
     def _position(self, i):
         return self.instances[i]["to_world"][:3, 3]

@@ -99,7 +99,8 @@ class DirectionalLight(LightType):
         r = dr.maximum(self.radius, dr.norm(ref.p - self.center))
         p = ref.p - d * (2.0 * r)
         slot = dr.gather(mi.UInt32, self.slot, idx, active)
-        E = self.textures.eval(slot, mi.Point2f(0.5), wl.lambda_, active) * dr.gather(mi.Float, self.factor, idx, active)
+        E = self.textures.eval(slot, mi.Point2f(0.5), wl.lambda_, active,
+                               reach=tuple(int(i["slot"]) for i in self.instances)) * dr.gather(mi.Float, self.factor, idx, active)
         return LightSample(dr.select(active, E, 0.0), -d, dr.select(active, 1.0, 0.0), p, mi.Bool(True))
 
 
@@ -114,7 +115,8 @@ class DirectionalLight(LightType):
         fr = mi.Frame3f(d)
         o = self.center + (fr.s * disk.x + fr.t * disk.y - d) * self.radius
         slot = dr.gather(mi.UInt32, self.slot, idx, active)
-        E = self.textures.eval(slot, mi.Point2f(0.5), wl.lambda_, active) * dr.gather(mi.Float, self.factor, idx, active)
+        E = self.textures.eval(slot, mi.Point2f(0.5), wl.lambda_, active,
+                               reach=tuple(int(i["slot"]) for i in self.instances)) * dr.gather(mi.Float, self.factor, idx, active)
         return LeSample(o=o, d=d, L=dr.select(active, E, 0.0), pdf_pos=mi.Float(1.0 / (math.pi * self.radius ** 2)),
                         pdf_dir=mi.Float(1.0), n=mi.Normal3f(d), delta_dir=mi.Bool(True))
 

@@ -118,7 +118,7 @@ class DirectionalAreaLight(LightType):
         si, shape = self.geometry.intersect(ref.spawn_ray(wi), active)
         hit = active & si.is_valid() & (shape == dr.gather(mi.UInt32, self.shape_index, idx, active))
         slot = dr.gather(mi.UInt32, self.radiance, idx, hit)
-        L = self.textures.eval(slot, si.uv, wl.lambda_, hit)
+        L = self.textures.eval(slot, si.uv, wl.lambda_, hit, reach=tuple(int(i["radiance"]) for i in self.instances))
         return LightSample(dr.select(hit, L, 0.0), wi, dr.select(hit, 1.0, 0.0), mi.Point3f(si.p), mi.Bool(True))
 
     # -- emission (light tracing) ----------------------------------------------------------
@@ -131,7 +131,7 @@ class DirectionalAreaLight(LightType):
         area = dr.gather(mi.Float, mi.Float(self._area), idx, active)
         ok = active & (area > 0)
         slot = dr.gather(mi.UInt32, self.radiance, idx, ok)
-        L = self.textures.eval(slot, ps.uv, wl.lambda_, ok)
+        L = self.textures.eval(slot, ps.uv, wl.lambda_, ok, reach=tuple(int(i["radiance"]) for i in self.instances))
         return LeSample(o=ps.p, d=mi.Vector3f(ps.n), L=dr.select(ok, L, 0.0),
                         pdf_pos=dr.select(ok, dr.rcp(area), 0.0), pdf_dir=mi.Float(1.0), n=mi.Normal3f(ps.n),
                         delta_dir=mi.Bool(True))

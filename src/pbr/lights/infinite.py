@@ -182,7 +182,8 @@ class ConstantLight(LightType):
 
     def _L(self, idx, lam, active):
         slot = dr.gather(mi.UInt32, self.radiance, idx, active)
-        return self.textures.eval(slot, mi.Point2f(0.0), lam, active)
+        return self.textures.eval(slot, mi.Point2f(0.0), lam, active,
+                                  reach=tuple(int(i["radiance"]) for i in self.instances))
 
     def sample_Li(self, idx, ref, u, wl, active) -> LightSample:
         wi = _uniform_sphere(u)

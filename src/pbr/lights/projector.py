@@ -150,7 +150,7 @@ class ProjectorLight(DeltaPositionLight):
             ok &= local.z > 0
         ok &= (uv.x >= 0) & (uv.x <= 1) & (uv.y >= 0) & (uv.y <= 1)
         slot = dr.gather(mi.UInt32, self.slot, idx, ok)
-        E = self.textures.eval(slot, uv, wl.lambda_, ok) * dr.gather(mi.Float, self.factor, idx, ok)
+        E = self.textures.eval(slot, uv, wl.lambda_, ok, reach=tuple(int(i["slot"]) for i in self.instances)) * dr.gather(mi.Float, self.factor, idx, ok)
         if self.pbrt:
             L = E * inv_dist2
         else:
