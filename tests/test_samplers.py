@@ -18,7 +18,8 @@ from pbr.plugins.props import Props
 from pbr.samplers import SAMPLERS, seed_array
 from pbr.samplers import lowdiscrepancy as ld
 
-LD_SAMPLERS = ["stratified", "multijitter", "orthogonal", "ldsampler", "sobol", "paddedsobol", "zsobol", "halton"]
+LD_SAMPLERS = ["stratified", "multijitter", "orthogonal", "ldsampler", "sobol", "paddedsobol", "zsobol", "halton",
+               "pmj02bn"]
 
 
 def make(name, **params):
@@ -482,7 +483,7 @@ def test_bench_samplers_fits_slopes_and_equal_time():
     assert bench.analyse(rows)["s"]["sobol"]["slope"] == pytest.approx(-2.0)
 
 
-@pytest.mark.parametrize("name", ["independent", "zsobol", "halton"])
+@pytest.mark.parametrize("name", ["independent", "zsobol", "halton", "pmj02bn"])
 def test_frozen_renders_replay_with_other_seeds(name):
     """pbr.freeze records a render; replays with other (opaque) seeds give the unfrozen
     images: the streams take the seed as a kernel input, and the samplers' tables
