@@ -48,9 +48,9 @@ def test_blue_noise_placement_spreads_the_points():
 
 @pytest.mark.parametrize("spp", [16, 64, 32])
 def test_2d_draws_are_shifted_pmj02bn_prefixes_and_1d_draws_are_stratified(spp):
-    """In each pixel: the 2D draws of the first sets are a toroidal shift (per pixel and
-    dimension) of a set's first spp points, a (0,2)-net; past the last set the same at a
-    permuted index; 1D draws have one sample per 1/spp stratum."""
+    """In each pixel: the 2D draws are a toroidal shift (per pixel and dimension) of a
+    permutation of a set's first spp points, a (0,2)-net (set d / 2 mod 5 for dimension
+    d); 1D draws have one sample per 1/spp stratum."""
     d = draws("pmj02bn", spp, size=(3, 2), pattern="121212121212")
     table = pmj.pmj02bn_sets() / 2.0 ** 32
     shifts = []
@@ -62,20 +62,20 @@ def test_2d_draws_are_shifted_pmj02bn_prefixes_and_1d_draws_are_stratified(spp):
                 assert sorted(np.floor(pixel[:, col] * spp).astype(int)) == list(range(spp))
                 col, dim = col + 1, dim + 1
                 continue
-            inst = dim // 2
-            pts = table[inst % pmj.N_SETS, :spp]
-            if inst < pmj.N_SETS:
-                shift = np.mod(pixel[:, col:col + 2] - pts, 1.0)
-                shift = np.where(shift > 1 - 1e-5, shift - 1, shift)
-                assert np.ptp(shift, axis=0).max() < 1e-5
-                shifts.append(shift[0])
-            else:   # a permutation of the prefix, shifted: the same set of differences
-                shift = np.mod(pixel[:, col:col + 2][:, None] - pts[None], 1.0)     # [draw, point]
+            pts = table[(dim // 2) % pmj.N_SETS, :spp]
+            # a permutation of the prefix, shifted: one shift maps every draw to a point
+            shift = np.mod(pixel[:, col:col + 2][:, None] - pts[None], 1.0)     # [draw, point]
 
-                def fits(delta):
-                    d = np.abs(shift - delta)
-                    return (np.minimum(d, 1 - d) < 1e-5).all(-1).any(1).all()
-                assert any(fits(shift[0, j]) for j in range(spp))
+            def fits(delta):
+                d = np.abs(shift - delta)
+                return (np.minimum(d, 1 - d) < 1e-5).all(-1).sum(1) == 1
+
+            found = [shift[0, j] for j in range(spp) if fits(shift[0, j]).all()]
+            assert len(found) == 1
+            d = np.abs(shift - found[0])
+            matched = (np.minimum(d, 1 - d) < 1e-5).all(-1).argmax(1)
+            assert sorted(matched) == list(range(spp))      # each point drawn once
+            shifts.append(found[0])
             assert is_net(pts, spp.bit_length() - 1)
             col, dim = col + 2, dim + 2
     # the shifts differ between pixels and dimensions

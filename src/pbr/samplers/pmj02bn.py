@@ -4,12 +4,13 @@
 Kilpatrick 2018): every prefix of 2^k points has exactly one point in each elementary
 interval of area 2^-k (all shapes 2^-a x 2^-(k-a)), and points are placed as far as
 possible from the earlier ones (best candidate: blue noise). pbr generates its sets
-itself (:func:`generate_pmj02bn`; :func:`main` rebuilds ``data/pmj02bn_5x4096.npy``): 5 sets of 4096 points, where pbrt-v4 ships 5 sets of 65536.
+itself (:func:`generate_pmj02bn`; :func:`main` rebuilds ``data/pmj02bn_5x4096.npy``):
+5 sets of 4096 points, where pbrt-v4 ships 5 sets of 65536.
 
 As in pbrt-v4: the film position takes set 0, sorted into the pixels of a tile (each pixel
 of a tile^2 block gets its own sub-square's points); the 2D draw of dimension d takes set
-d / 2 at the sample index (past the last set, at an index permuted per pixel and
-dimension); a 1D draw puts the pixel's samples in N strata (a permuted index) plus an
+d / 2 (mod 5) at the sample index permuted per pixel and dimension (pbrt-v4 permutes
+only past the last set); a 1D draw puts the pixel's samples in N strata (a permuted index) plus an
 offset. The offsets (a toroidal shift per pixel and dimension) are pbrt-v4's blue-noise
 texture values; pbr's are an R2 (plastic-constant) dither of the pixel, which is blue noise
 across pixels, shifted by a hash of (dimension, seed): uniform for every pixel over the
@@ -179,8 +180,9 @@ def _wrap(u):
 
 
 class PMJ02BNStream(SampleStream):
-    """A pixel sample of ``pmj02bn``: 2D draws read the pmj02bn sets, 1D draws permute
-    the pixel's strata; both shifted by the pixel's offset for that dimension."""
+    """A pixel sample of ``pmj02bn``: 2D draws read the pmj02bn sets at a permuted index,
+    1D draws permute the pixel's strata; both shifted by the pixel's offset for that
+    dimension."""
 
     _fields = {"px": "UInt32", "py": "UInt32", "index": "UInt32", "dim": "UInt32", "seed": "UInt32"}
     # constants: spp, tile (pixel tile side), tile_table (set 0 sorted into pixels)
@@ -204,9 +206,11 @@ class PMJ02BNStream(SampleStream):
     def next_2d(self):
         d = self.dim
         self.dim = d + 2
-        instance = d // 2
-        i = dr.select(instance >= N_SETS, self._permuted(d), self.index)
-        at = ((instance % N_SETS) * N_POINTS + i) * 2
+        # pbrt-v4 permutes the index only past the last set; permuting it always
+        # decorrelates draws that read the same index of different sets (measured on
+        # bench_samplers' direct scene: 3.4x lower relMSE at 1024 spp, the same at 16)
+        i = self._permuted(d)
+        at = (((d // 2) % N_SETS) * N_POINTS + i) * 2
         sets = tables()["sets"]
         x = u32_to_unit(dr.gather(mi.UInt32, sets, at))
         y = u32_to_unit(dr.gather(mi.UInt32, sets, at + 1))
