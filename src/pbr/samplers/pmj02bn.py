@@ -250,6 +250,7 @@ class PMJ02BNSampler(Sampler):
         super().__init__(props, default_count=16)
         if props:
             props.finish()
+        _tile_table(self.sample_count)   # made before a frozen render's recording reads it
 
     def round_spp(self, spp, warn=False):
         if spp > N_POINTS:
@@ -261,7 +262,6 @@ class PMJ02BNSampler(Sampler):
         self.round_spp(spp)
         w = size[0]
         tile, _ = pixel_tile(spp)
-        _tile_table(spp)   # made before a frozen recording reads it
         cls = stream_class(PMJ02BNStream, spp=spp, tile=tile)
         return cls(px=pixel % w, py=pixel // w, index=mi.UInt32(index), dim=mi.UInt32(2),
                    seed=self.render_seed(seed))
