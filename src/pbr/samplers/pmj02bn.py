@@ -133,9 +133,7 @@ def pixel_tile(spp: int) -> tuple:
     """(tile, samples): set 0's points sorted into a tile x tile block of pixels (tile =
     2^(6 - log4 spp), spp rounded up to a power of 4), the first ``spp`` points in each
     pixel's sub-square, as positions inside that pixel: (tile^2 * spp, 2) uint32."""
-    spp4 = 1
-    while spp4 < spp:
-        spp4 *= 4
+    spp4 = _pow4_at_least(spp)[1]
     tile = 1
     while tile * tile * spp4 < N_POINTS:
         tile *= 2
@@ -154,24 +152,27 @@ def pixel_tile(spp: int) -> tuple:
     return tile, out.reshape(-1, 2)
 
 
+def _pow4_at_least(spp: int) -> tuple:
+    """(j, 4^j): the smallest power of 4 >= ``spp``."""
+    j = 0
+    while 4 ** j < spp:
+        j += 1
+    return j, 4 ** j
+
+
 def tables() -> dict:
-    """The Dr.Jit tables of the current variant: ``sets`` (flat, x and y interleaved) and
-    ``tiles`` (the pixel tables made so far, by spp; ``pbr.freeze`` hands them to
-    ``dr.freeze`` as state)."""
+    """The Dr.Jit tables of the current variant (``pbr.freeze`` hands them to ``dr.freeze``
+    as state): ``sets`` (flat, x and y interleaved) and ``tiles``: the pixel tables of
+    :func:`pixel_tile` for spp = 1, 4, ..., 4096, each 2 * 4096 entries, one after the other
+    (a render of spp reads the table of spp rounded up to a power of 4, its first spp
+    points per pixel)."""
     return _tables(mi.variant())
 
 
 @functools.lru_cache(maxsize=None)
 def _tables(variant: str) -> dict:
-    return {"sets": mi.UInt32(pmj02bn_sets().ravel()), "tiles": {}}
-
-
-def _tile_table(spp: int) -> mi.UInt32:
-    tiles = tables()["tiles"]
-    key = f"spp{spp}"
-    if key not in tiles:
-        tiles[key] = mi.UInt32(pixel_tile(spp)[1].ravel())
-    return tiles[key]
+    levels = np.concatenate([pixel_tile(4 ** j)[1].ravel() for j in range(7)])
+    return {"sets": mi.UInt32(pmj02bn_sets().ravel()), "tiles": mi.UInt32(levels)}
 
 
 def _wrap(u):
@@ -185,7 +186,7 @@ class PMJ02BNStream(SampleStream):
     dimension."""
 
     _fields = {"px": "UInt32", "py": "UInt32", "index": "UInt32", "dim": "UInt32", "seed": "UInt32"}
-    # constants: spp, tile (pixel tile side), tile_table (set 0 sorted into pixels)
+    # constants: spp, spp4 (spp rounded up to a power of 4 = 4^level), tile (pixel tile side)
 
     def _offset(self, dim):
         """The pixel's toroidal shift for ``dim``: an R2 dither of the pixel (blue noise
@@ -220,8 +221,9 @@ class PMJ02BNStream(SampleStream):
         # set 0 sorted into the pixels of a tile (pbrt-v4's GetPixel2D), shifted per pixel
         # by a hash of the seed (pbrt-v4 leaves it unshifted; shifted, renders with
         # different seeds are independent estimates, as pbr.validate needs)
-        at = (((self.py % self.tile) * self.tile + self.px % self.tile) * self.spp + self.index) * 2
-        table = _tile_table(self.spp)
+        at = (self.level * 2 * N_POINTS
+              + (((self.py % self.tile) * self.tile + self.px % self.tile) * self.spp4 + self.index) * 2)
+        table = tables()["tiles"]
         x = u32_to_unit(dr.gather(mi.UInt32, table, at))
         y = u32_to_unit(dr.gather(mi.UInt32, table, at + 1))
         return mi.Point2f(_wrap(x + self._offset(0)), _wrap(y + self._offset(1)))
@@ -250,7 +252,6 @@ class PMJ02BNSampler(Sampler):
         super().__init__(props, default_count=16)
         if props:
             props.finish()
-        _tile_table(self.sample_count)   # made before a frozen render's recording reads it
 
     def round_spp(self, spp, warn=False):
         if spp > N_POINTS:
@@ -261,8 +262,9 @@ class PMJ02BNSampler(Sampler):
     def start(self, pixel, index, spp, size, seed):
         self.round_spp(spp)
         w = size[0]
-        tile, _ = pixel_tile(spp)
-        cls = stream_class(PMJ02BNStream, spp=spp, tile=tile)
+        level, spp4 = _pow4_at_least(spp)
+        tile = 1 << (6 - level)
+        cls = stream_class(PMJ02BNStream, spp=spp, spp4=spp4, level=level, tile=tile)
         return cls(px=pixel % w, py=pixel // w, index=mi.UInt32(index), dim=mi.UInt32(2),
                    seed=self.render_seed(seed))
 
