@@ -115,6 +115,11 @@ def test_points_are_uniform_over_seeds():
 
 
 def test_more_samples_than_the_sets_hold_is_an_error():
+    import pbr
     s = make("pmj02bn", sample_count=16)
     with pytest.raises(ValueError, match=r"sampler: the 'pmj02bn' sampler takes at most 4096"):
         s.round_spp(8192)
+    d = pbr.cornell_box(8, 4)
+    d["sensor"]["sampler"] = {"type": "pmj02bn", "sample_count": 8192}
+    with pytest.raises(pbr.SceneError, match=r"sensor\.sampler\.sample_count.*at most 4096"):
+        pbr.load_dict(d)

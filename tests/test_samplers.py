@@ -385,7 +385,7 @@ def z_scores(a, b):
     return np.abs(a.mean(0) - b.mean(0)) / stderr
 
 
-@pytest.mark.parametrize("name", ["zsobol", "stratified", "halton"])
+@pytest.mark.parametrize("name", ["zsobol", "stratified", "halton", "pmj02bn"])
 def test_reverse_mode_gradients_match_independent_and_finite_differences(name):
     """The PRB gradient with a sampler agrees with independent's, and (red and green
     albedo) with finite differences, which also catches a replay that does not repeat the

@@ -229,6 +229,10 @@ class PMJ02BNStream(SampleStream):
         return mi.Point2f(_wrap(x + self._offset(0)), _wrap(y + self._offset(1)))
 
 
+class _TooMany(ValueError):
+    """More samples per pixel than the point sets hold."""
+
+
 @SAMPLERS.register("pmj02bn")
 class PMJ02BNSampler(Sampler):
     """``pmj02bn``: pbrt-v4's ``PMJ02BNSampler``: 2D draws from progressive multi-jittered
@@ -249,14 +253,22 @@ class PMJ02BNSampler(Sampler):
     name = "pmj02bn"
 
     def __init__(self, props=None):
-        super().__init__(props, default_count=16)
+        try:
+            super().__init__(props, default_count=16)
+        except _TooMany as e:
+            if props is None:
+                raise
+            raise props.error("pixelsamples" if props.has("pixelsamples") else "sample_count", e.why) from None
         if props:
             props.finish()
 
     def round_spp(self, spp, warn=False):
         if spp > N_POINTS:
-            raise ValueError(f"{self.path}: the 'pmj02bn' sampler takes at most {N_POINTS} samples per pixel "
-                             f"(its point sets have {N_POINTS} points), got {spp}")
+            why = (f"the 'pmj02bn' sampler takes at most {N_POINTS} samples per pixel (its point sets have "
+                   f"{N_POINTS} points), got {spp}")
+            e = _TooMany(f"{self.path}: {why}")
+            e.why = why
+            raise e
         return spp
 
     def start(self, pixel, index, spp, size, seed):
