@@ -64,7 +64,8 @@ sys.path.insert(0, str(HERE))
 from bench_integrators import floor_of, timed_render  # noqa: E402
 
 SCENES = ("direct", "textured", "cornell", "envglossy", "medium")
-SAMPLERS = ("independent", "stratified", "multijitter", "ldsampler", "sobol", "paddedsobol", "zsobol", "halton")
+SAMPLERS = ("independent", "stratified", "multijitter", "ldsampler", "sobol", "paddedsobol", "zsobol", "halton",
+            "pmj02bn")
 RELMSE_EPS = 1e-2
 REF_BATCHES = 16
 CACHE_VERSION = 1

@@ -18,7 +18,8 @@ from pbr.plugins.props import Props
 from pbr.samplers import SAMPLERS, seed_array
 from pbr.samplers import lowdiscrepancy as ld
 
-LD_SAMPLERS = ["stratified", "multijitter", "orthogonal", "ldsampler", "sobol", "paddedsobol", "zsobol", "halton"]
+LD_SAMPLERS = ["stratified", "multijitter", "orthogonal", "ldsampler", "sobol", "paddedsobol", "zsobol", "halton",
+               "pmj02bn"]
 
 
 def make(name, **params):
@@ -317,13 +318,17 @@ def test_images_are_unbiased_against_independent(name, params):
 
 @pytest.mark.slow
 def test_biased_samplers_fail_the_unbiasedness_test(monkeypatch):
-    """Must-fail: strata centres without jitter (a deterministic rule, biased), and zsobol
-    whose 2D draws are squeezed toward 0 (u * 0.9), are caught."""
+    """Must-fail: strata centres without jitter (a deterministic rule, biased), zsobol
+    whose 2D draws are squeezed toward 0 (u * 0.9), and unshifted pmj02bn are caught."""
     assert not unbiased("stratified", {"jitter": False}).passed
     from pbr.samplers import sobol
     orig = sobol.ZSobolStream.next_2d
     monkeypatch.setattr(sobol.ZSobolStream, "next_2d", lambda self: orig(self) * 0.9)
     assert not unbiased("zsobol", {}).passed
+    # pmj02bn without its per-pixel, per-seed shifts: every render sees the same points
+    from pbr.samplers import pmj02bn
+    monkeypatch.setattr(pmj02bn.PMJ02BNStream, "_offset", lambda self, dim: mi.Float(0.0))
+    assert not unbiased("pmj02bn", {}).passed
 
 
 def grad_scene(sampler, spp):
@@ -380,7 +385,7 @@ def z_scores(a, b):
     return np.abs(a.mean(0) - b.mean(0)) / stderr
 
 
-@pytest.mark.parametrize("name", ["zsobol", "stratified", "halton"])
+@pytest.mark.parametrize("name", ["zsobol", "stratified", "halton", "pmj02bn"])
 def test_reverse_mode_gradients_match_independent_and_finite_differences(name):
     """The PRB gradient with a sampler agrees with independent's, and (red and green
     albedo) with finite differences, which also catches a replay that does not repeat the
@@ -415,6 +420,7 @@ XML = """<scene version="3.0.0">
     ("independent", '<integer name="sample_count" value="5"/>', 5),
     ("zsobol", '<integer name="pixelsamples" value="32"/><string name="randomization" value="owen"/>', 32),
     ("halton", '<integer name="sample_count" value="12"/>', 12),
+    ("pmj02bn", '<integer name="pixelsamples" value="64"/><integer name="seed" value="2"/>', 64),
     ("stratified", '<integer name="xsamples" value="4"/><integer name="ysamples" value="3"/>', 12),
 ])
 def test_samplers_load_with_mitsuba_and_pbrt_names(kind, params, count):
@@ -482,7 +488,7 @@ def test_bench_samplers_fits_slopes_and_equal_time():
     assert bench.analyse(rows)["s"]["sobol"]["slope"] == pytest.approx(-2.0)
 
 
-@pytest.mark.parametrize("name", ["independent", "zsobol", "halton"])
+@pytest.mark.parametrize("name", ["independent", "zsobol", "halton", "pmj02bn"])
 def test_frozen_renders_replay_with_other_seeds(name):
     """pbr.freeze records a render; replays with other (opaque) seeds give the unfrozen
     images: the streams take the seed as a kernel input, and the samplers' tables

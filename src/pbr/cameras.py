@@ -154,8 +154,6 @@ class ProjectiveCamera:
                 self.sampler = SAMPLERS[t](props.child(key))
             elif props.loader is not None and props.loader.is_medium(child):
                 props.mark(key)  # the camera's medium: resolved by the loader
-            elif t == "pmj02bn":
-                raise props.error(key, f"sampler {t!r} is not supported yet (supported: {', '.join(sorted(SAMPLERS))})")
             else:
                 raise props.error(key, f"unexpected {t!r} inside a sensor (expected a film or a sampler)")
         w, h = self.film.full_size
