@@ -96,6 +96,18 @@ def mse(img, ref):
     return dr.mean(dr.square(img - ref), axis=None)
 
 
+def views_backward(scene, params, refs: list, spp: int, seed: int, loss=mse) -> float:
+    """Render every view (sensor s with seed ``seed + s``), back-propagate each view's
+    loss against ``refs[s]`` (the gradients add up) and return the summed loss."""
+    total = 0.0
+    for s, ref in enumerate(refs):
+        img = pbr.render(scene, params, sensor=s, spp=spp, seed=seed + s)
+        li = loss(img, ref)
+        dr.backward(li)
+        total += float(li.array[0])
+    return total
+
+
 def optimize(scene, init: dict, refs: list, *, n_iter: int, lr, spp: int, bounds: dict,
              error=None, loss=mse, lr_final: float = 1.0, grad_scale: float = 1.0, seed: int = 0,
              log: bool = True, name: str = "") -> Result:
@@ -122,12 +134,7 @@ def optimize(scene, init: dict, refs: list, *, n_iter: int, lr, spp: int, bounds
     for it in range(n_iter):
         decay = lr_final ** (it / max(n_iter - 1, 1))
         opt.set_learning_rate({k: lrs[k] * decay for k in init})
-        total = 0.0
-        for s, ref in enumerate(refs):
-            img = pbr.render(scene, params, sensor=s, spp=spp, seed=seed + it * n_views + s)
-            li = loss(img, ref)
-            dr.backward(li)
-            total += float(li.array[0])
+        total = views_backward(scene, params, refs, spp, seed + it * n_views, loss)
         opt.step(grad_scale=grad_scale if grad_scale != 1.0 else None)
         for k in init:
             lo, hi = bounds[k]

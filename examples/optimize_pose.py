@@ -87,12 +87,7 @@ def main(small: bool = False, grad_scale: float = 1.0, log: bool = True, **overr
         opt.set_learning_rate(cfg["lr"] * cfg["lr_final"] ** (it / max(n_iter - 1, 1)))
         params[KEY] = posed(v0, opt["pose"])
         params.update()
-        total = 0.0
-        for s, ref in enumerate(refs):
-            img = pbr.render(scene, params, sensor=s, spp=cfg["spp"], seed=it * n_views + s)
-            li = C.mse(img, ref)
-            dr.backward(li)
-            total += float(li.array[0])
+        total = C.views_backward(scene, params, refs, cfg["spp"], it * n_views)
         opt.step(grad_scale=grad_scale if grad_scale != 1.0 else None)
         pose = np.array(opt["pose"])
         losses.append(total)

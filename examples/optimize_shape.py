@@ -136,12 +136,7 @@ def main(small: bool = False, grad_scale: float = 1.0, log: bool = True, **overr
         dr.enable_grad(xd)
         params[KEY] = xd
         params.update()
-        total = 0.0
-        for s, ref in enumerate(refs):
-            img = pbr.render(scene, params, sensor=s, spp=cfg["spp"], seed=it * n_views + s)
-            li = C.mse(img, ref)
-            dr.backward(li)
-            total += float(li.array[0])
+        total = C.views_backward(scene, params, refs, cfg["spp"], it * n_views)
         g = np.zeros_like(x)
         np.add.at(g, perm, np.array(dr.grad(xd), np.float64).reshape(-1, 3) * grad_scale)
         u = adam.step(u, solve(chol, g), lr)

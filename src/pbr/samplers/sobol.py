@@ -42,6 +42,17 @@ class _PowerOfTwo(Sampler):
         return self._rounded(spp, 1 << log2_int(spp), "a power-of-two sample count", warn)
 
 
+class _ScrambledSobol(_PowerOfTwo):
+    """The Sobol'-based samplers (``sobol``, ``paddedsobol``, ``zsobol``): 16 samples per
+    pixel by default and a ``randomization`` (default ``fastowen``, as pbrt-v4)."""
+
+    def __init__(self, props=None):
+        super().__init__(props, default_count=16)
+        self.randomization = parse_randomization(props, "fastowen")
+        if props:
+            props.finish()
+
+
 # ------------------------------------------------------------------------------ sobol
 
 class SobolStream(SampleStream):
@@ -111,7 +122,7 @@ def sobol_pixel_index(px: mi.UInt32, py: mi.UInt32, index: mi.UInt32, m: int) ->
 
 
 @SAMPLERS.register("sobol")
-class SobolSampler(_PowerOfTwo):
+class SobolSampler(_ScrambledSobol):
     """``sobol``: pbrt-v4's ``SobolSampler``, one Sobol' sequence over the whole film:
     dimensions 0 and 1 (unscrambled) place the samples in the pixels and inside them, the
     other dimensions (up to 1024, then wrapping to 2) are randomised per dimension.
@@ -130,12 +141,6 @@ class SobolSampler(_PowerOfTwo):
 
     name = "sobol"
     progressive = True
-
-    def __init__(self, props=None):
-        super().__init__(props, default_count=16)
-        self.randomization = parse_randomization(props, "fastowen")
-        if props:
-            props.finish()
 
     def start(self, pixel, index, spp, size, seed):
         w, h = size
@@ -174,7 +179,7 @@ class PaddedSobolStream(SampleStream):
 
 
 @SAMPLERS.register("paddedsobol")
-class PaddedSobolSampler(_PowerOfTwo):
+class PaddedSobolSampler(_ScrambledSobol):
     """``paddedsobol``: pbrt-v4's ``PaddedSobolSampler``: per pixel, each 1D or 2D draw
     takes the first one or two Sobol' dimensions at a shuffled sample index, randomised
     independently for every pixel and dimension ("padding" 2D (0,2)-sequences).
@@ -191,12 +196,6 @@ class PaddedSobolSampler(_PowerOfTwo):
     """
 
     name = "paddedsobol"
-
-    def __init__(self, props=None):
-        super().__init__(props, default_count=16)
-        self.randomization = parse_randomization(props, "fastowen")
-        if props:
-            props.finish()
 
     def start(self, pixel, index, spp, size, seed):
         cls = stream_class(PaddedSobolStream, spp=spp, nbits=log2_int(spp), randomization=self.randomization)
@@ -252,7 +251,7 @@ class ZSobolStream(SampleStream):
 
 
 @SAMPLERS.register("zsobol")
-class ZSobolSampler(_PowerOfTwo):
+class ZSobolSampler(_ScrambledSobol):
     """``zsobol``: pbrt-v4's ``ZSobolSampler`` (its default sampler): one (0,2)-sequence
     shared by all pixels in Morton order with per-dimension permuted base-4 digits, so
     that each pixel gets a (0,2)-sequence and neighbouring pixels' errors are blue noise.
@@ -269,12 +268,6 @@ class ZSobolSampler(_PowerOfTwo):
     """
 
     name = "zsobol"
-
-    def __init__(self, props=None):
-        super().__init__(props, default_count=16)
-        self.randomization = parse_randomization(props, "fastowen")
-        if props:
-            props.finish()
 
     def start(self, pixel, index, spp, size, seed):
         w, h = size

@@ -1056,14 +1056,8 @@ class PBRTScene:
         if cls in ("imagemap", "checkerboard", "dots") and self.pbr_plugin(TEXTURE_TYPES, cls):
             return self.pbrt_texture(p, cls)
         if cls == "imagemap":
-            fname = p.string("filename")
-            if fname is None:
-                raise p.error(None, "imagemap needs \"string filename\"")
-            full = resolve(fname, self.base)
-            if not os.path.exists(full):
-                self.missing(p.d.where, p.d.name, fname, full)
-                for q in p.d.params:
-                    q.used = True
+            full = self.image_file(p)
+            if full is None:
                 return 0.5
             wrap = p.string("wrap", "repeat")
             wraps = {"repeat": "repeat", "clamp": "clamp", "black": "clamp", "octahedralsphere": "repeat"}
@@ -1105,19 +1099,27 @@ class PBRTScene:
             return self.pbrt_texture(p, cls)
         raise p.error(None, f"unknown texture {cls!r}")
 
+    def image_file(self, p: _Params):
+        """The path of an ``imagemap``'s ``filename``, or None when the file is missing
+        (noted by :meth:`missing`; the texture's parameters count as used)."""
+        fname = p.string("filename")
+        if fname is None:
+            raise p.error(None, "imagemap needs \"string filename\"")
+        full = resolve(fname, self.base)
+        if not os.path.exists(full):
+            self.missing(p.d.where, p.d.name, fname, full)
+            for q in p.d.params:
+                q.used = True
+            return None
+        return full
+
     def pbrt_texture(self, p: _Params, cls: str):
         """pbr's texture of pbrt-v4's name, with pbrt-v4's parameters, and ``to_world`` =
         the CTM at the ``Texture`` directive (pbrt-v4's texture space, used by 3D
         textures and the spherical, cylindrical and planar mappings)."""
         if cls == "imagemap":
-            fname = p.string("filename")
-            if fname is None:
-                raise p.error(None, "imagemap needs \"string filename\"")
-            full = resolve(fname, self.base)
-            if not os.path.exists(full):
-                self.missing(p.d.where, p.d.name, fname, full)
-                for q in p.d.params:
-                    q.used = True
+            full = self.image_file(p)
+            if full is None:
                 return 0.5
         t = self.passthrough(p, cls)
         if cls == "imagemap" and "encoding" in t and os.path.splitext(t["filename"])[1].lower() not in (
