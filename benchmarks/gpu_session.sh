@@ -17,6 +17,7 @@
 set -u
 # Phases run in the order given: tests, bench, profile (default: tests bench). Environment:
 #   TEST_S      seconds for the test phase (default 330)
+#   NWORKERS    pytest-xdist workers (default 12)
 #   PYTEST_ARGS what pytest runs (default: tests, and then the triage runs beside it)
 #   BENCHES     which benchmarks (default: cornell scenes optim volpath)
 phases=${*:-tests bench}
@@ -45,7 +46,7 @@ for phase in $phases; do
     stamp "start tests"
     # A test over --timeout is stopped with its stack (thread method: the worker exits and
     # xdist reports it), so pytest ends inside the phase and prints its summary.
-    timeout "$test_s" $py -m pytest -v -n 12 -p no:cacheprovider --timeout $(( test_s * 3 / 4 )) \
+    timeout "$test_s" $py -m pytest -v -n ${NWORKERS:-12} -p no:cacheprovider --timeout $(( test_s * 3 / 4 )) \
       --timeout-method thread --tb=short -rfE --durations=25 ${PYTEST_ARGS:-tests} > "$L/pytest.txt" 2>&1 &
     if [ -z "${PYTEST_ARGS:-}" ]; then
       ( timeout "$test_s" $py benchmarks/triage_backend.py --backend cuda --timeout 120 --out "$L/triage.json" \
