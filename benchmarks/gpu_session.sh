@@ -25,7 +25,7 @@ test_s=${TEST_S:-330}
 OUT=${OUT:-out/gpu}
 L=$OUT/logs
 mkdir -p "$L"
-export PBR_TEST_BACKEND=cuda PYTHONUNBUFFERED=1 PBR_FAILURE_LOG=$L/failures.txt
+export PBR_TEST_BACKEND=cuda PYTHONUNBUFFERED=1 PBR_FAILURE_LOG=$L/failures.txt PBR_DURATION_LOG=$L/durations.txt
 py=python3
 t0=$(date +%s)
 stamp() { echo "[$(( $(date +%s) - t0 )) s] $*"; }

@@ -29,11 +29,18 @@ def pytest_configure(config):
 def pytest_runtest_logreport(report):
     """With ``PBR_FAILURE_LOG`` set, every failure's report is appended to that file as it
     happens (by the process that ran the test): a run cut short by a time limit, as on a
-    lent GPU machine (benchmarks/gpu_session.sh), still leaves its tracebacks."""
+    lent GPU machine (benchmarks/gpu_session.sh), still leaves its tracebacks. With
+    ``PBR_DURATION_LOG`` set, every test's time is appended likewise."""
     path = os.environ.get("PBR_FAILURE_LOG")
     if path and report.failed and not hasattr(report, "node"):   # 'node': xdist's copy in the controller
         with open(path, "a") as f:
             f.write(f"===== {report.nodeid} ({report.when})\n{report.longreprtext}\n")
+    # With PBR_DURATION_LOG set, each test's call time as it ends (a run cut short still
+    # says which tests took its time).
+    path = os.environ.get("PBR_DURATION_LOG")
+    if path and report.when == "call" and not hasattr(report, "node"):
+        with open(path, "a") as f:
+            f.write(f"{report.duration:.2f} {report.outcome} {report.nodeid}\n")
 
 
 def pytest_report_header(config):

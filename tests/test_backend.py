@@ -105,7 +105,8 @@ def test_a_test_that_switches_the_variant_fails(tmp_path):
 
 
 # (\\? : a notebook's JSON escapes the quotes)
-HARD_CODED = re.compile(r"""set_variant\(\s*\\?["']|set_backend\(\s*\\?["'](llvm|cuda)\\?["']|drjit\.llvm\b|dr\.llvm\.""")
+HARD_CODED = re.compile(r"""set_variant\(\s*\\?["']|set_backend\(\s*\\?["'](llvm|cuda)\\?["']|drjit\.llvm\b|dr\.llvm\."""
+                        r"""|["']--backend["'],\s*["'](llvm|cuda)["']""")
 
 
 def hard_coded_backends(text: str) -> list[int]:
@@ -119,6 +120,7 @@ def test_no_test_benchmark_or_example_hard_codes_a_backend():
     --backend parsing with set_backend mocked.)"""
     assert hard_coded_backends('mi.set_variant("llvm_ad_spectral")\nx = 1\n    pbr.set_backend("llvm")') == [1, 3]
     assert hard_coded_backends('"pbr.set_backend(\\"cuda\\")\\n",\n"mi.set_variant(\\"llvm_ad_rgb\\")"') == [1, 2]
+    assert hard_coded_backends('main(["render", "-o", o, "--backend", "llvm"])\npbr render s.xml --backend cuda') == [1]
     found = {}
     for sub in ("tests", "benchmarks", "examples", "notebooks"):
         for path in sorted(glob.glob(os.path.join(ROOT, sub, "**", "*.*"), recursive=True)):

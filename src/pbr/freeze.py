@@ -13,7 +13,10 @@ Within a frozen function, ``params.update()`` must take its values-only path (a 
 constant or bitmap texture, or its ``eta``; see :meth:`pbr.SceneParameters.update`): a full rebuild reads
 parameters on the host, which a recording cannot replay. Seeds are passed as
 ``mi.UInt32`` (``dr.opaque(mi.UInt32, i)``), not Python ints, which would be recorded as
-constants (one recording per seed).
+constants (one recording per seed). ``dr.freeze``'s inputs also include every live
+Mitsuba shape of the process (the registry its ray-tracing calls can reach): another
+scene released between two calls changes them and causes one more recording
+(docs/inverse.md).
 """
 
 from __future__ import annotations
