@@ -46,7 +46,10 @@ for phase in $phases; do
     stamp "start tests"
     # A test over --timeout is stopped with its stack (thread method: the worker exits and
     # xdist reports it), so pytest ends inside the phase and prints its summary.
-    timeout "$test_s" $py -m pytest -v -n ${NWORKERS:-12} -p no:cacheprovider --timeout $(( test_s * 3 / 4 )) \
+    # worksteal (pytest-xdist >= 3.2): an idle worker takes tests queued on a busy one
+    # (with 'load', 58 gradient tests waited behind long ones until the time ran out)
+    dist=$($py -c 'import xdist; v = tuple(int(x) for x in xdist.__version__.split(".")[:2]); print("worksteal" if v >= (3, 2) else "load")' 2>/dev/null || echo load)
+    timeout "$test_s" $py -m pytest -v -n ${NWORKERS:-12} --dist $dist -p no:cacheprovider --timeout $(( test_s * 3 / 4 )) \
       --timeout-method thread --tb=short -rfE --durations=25 ${PYTEST_ARGS:-tests} > "$L/pytest.txt" 2>&1 &
     if [ -z "${PYTEST_ARGS:-}" ]; then
       ( timeout "$test_s" $py benchmarks/triage_backend.py --backend cuda --timeout 120 --out "$L/triage.json" \
