@@ -65,6 +65,21 @@ def test_optional_blocks_are_dropped_only_without_their_module():
     assert without_optional(blocks, "os", "pbr.distributed") == blocks
 
 
+def _shows(readme_line: str, printed: str) -> bool:
+    """Whether a README line is what was printed: the whole line, or its start when the
+    README cuts it with '...'."""
+    if readme_line.endswith("..."):
+        return printed.startswith(readme_line[:-3])
+    return printed.rstrip() == readme_line.rstrip()
+
+
+def test_readme_output_lines_are_whole():
+    """A README line that leaves out the end of what was printed must say so with '...'
+    (the README once showed the 'valeu' error without its '(did you mean ...?)')."""
+    assert _shows("a: b", "a: b") and _shows("a: ...", "a: b (c)")
+    assert not _shows("a: b", "a: b (c)")
+
+
 def test_readme_python_blocks_run(tmp_path):
     with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as f:
         blocks = without_optional(readme_blocks(f.read()), "distributed", "from pbr import distributed")
@@ -80,5 +95,5 @@ def test_readme_python_blocks_run(tmp_path):
     for n, text in expected:
         printed = output_of_block(out.stdout, n).splitlines()
         for line in text.splitlines():
-            assert any(p.startswith(line.rstrip(". ")) for p in printed), (
+            assert any(_shows(line, p) for p in printed), (
                 f"README says block {n} prints {line!r}; it printed:\n" + "\n".join(printed))
