@@ -97,3 +97,20 @@ def test_readme_python_blocks_run(tmp_path):
         for line in text.splitlines():
             assert any(_shows(line, p) for p in printed), (
                 f"README says block {n} prints {line!r}; it printed:\n" + "\n".join(printed))
+
+
+def test_newcomer_install_notes():
+    """Issue 16 item 6: the 'notebooks' extra installs Jupyter (``make notebooks`` installs
+    it and opens notebooks/), and the README says that the import name ``pbr`` is shared
+    with OpenStack's build tool and how to tell which one is installed."""
+    import tomllib
+    with open(os.path.join(ROOT, "pyproject.toml"), "rb") as f:
+        extras = tomllib.load(f)["project"]["optional-dependencies"]
+    assert any(r.startswith("jupyterlab") for r in extras["notebooks"])
+    make = open(os.path.join(ROOT, "Makefile"), encoding="utf-8").read()
+    target = make.split("\nnotebooks:", 1)[1].split("\n\n", 1)[0]
+    assert re.search(r"pip install .*\[[^\]]*notebooks[^\]]*\]", target) and "jupyter lab notebooks" in target
+    readme = open(os.path.join(ROOT, "README.md"), encoding="utf-8").read()
+    assert "make notebooks" in readme
+    note = readme.split("**The name `pbr`.**", 1)[1].split("\n\n", 1)[0]
+    assert "OpenStack" in note and "pbr.__file__" in note and "pip uninstall pbr" in note
