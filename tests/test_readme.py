@@ -114,3 +114,23 @@ def test_newcomer_install_notes():
     assert "make notebooks" in readme
     note = readme.split("**The name `pbr`.**", 1)[1].split("\n\n", 1)[0]
     assert "OpenStack" in note and "pbr.__file__" in note and "pip uninstall pbr" in note
+
+
+def test_readme_command_lines_parse():
+    """Every ``pbr ...`` line of the README's shell blocks is accepted by pbr's command-line
+    parser (as pasted, less the comment), and gives no option twice (the README once set
+    the sample count twice on one line)."""
+    import shlex
+    from pbr import cli
+    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as f:
+        lines = [ln.split("#", 1)[0].strip() for lang, code in readme_blocks(f.read()) if lang == "sh"
+                 for ln in code.splitlines()]
+    commands = [shlex.split(ln)[1:] for ln in lines if ln.startswith("pbr ")]
+    assert len(commands) >= 6
+    parser = cli.build_parser()
+    for args in commands:
+        options = [a.split("=")[0] for a in args if a.startswith("--")]
+        assert len(options) == len(set(options)), args
+        if args == ["--version"]:
+            continue
+        parser.parse_args(args)          # exits (SystemExit 2) on an unknown option or a bad value
