@@ -20,7 +20,8 @@ Three kinds of keys (``flags(key)`` tells them apart, with Mitsuba's ``mi.ParamF
   shadows) in the projective integrators. Not inside ``pbr.freeze`` (Mitsuba rebuilds its
   acceleration structure on the host, which a recording cannot replay).
 - the sensor: ``<sensor>.to_world`` (rigid), ``x_fov`` (degrees), ``near_clip``,
-  ``far_clip``, ``principal_point_offset_x``/``_y``; the film's ``size``, ``crop_size``
+  ``far_clip``, ``principal_point_offset_x``/``_y`` (a ``thinlens``: ``aperture_radius``,
+  ``focus_distance`` too); the film's ``size``, ``crop_size``
   and ``crop_offset`` are read-only (load the scene with another film to change them).
   Not differentiable in pbr, except a perspective camera's ``to_world`` (its pose: the
   projective integrators differentiate it; the attached value is kept as the camera's
@@ -270,8 +271,8 @@ class _SensorParam(_Param):
             return t.Transform4f(np.asarray(cam.to_world, np.float64).tolist())
         if self.name.startswith("principal_point_offset_"):
             return t.Float(cam.pp["xy".index(self.name[-1])])
-        if self.name == "x_fov":
-            return t.Float(cam.x_fov)
+        if self.name in ("x_fov", "aperture_radius", "focus_distance"):
+            return t.Float(getattr(cam, self.name))
         if self.name.startswith("film."):
             film = cam.film
             w, h = film.size
@@ -309,6 +310,12 @@ class _SensorParam(_Param):
             if not 0.0 < v < 180.0:
                 raise ValueError(f"{key}: expected a field of view in (0, 180) degrees, got {v}")
             cam.x_fov = v
+        elif self.name in ("aperture_radius", "focus_distance"):
+            if not v >= 0.0:
+                raise ValueError(f"{key}: expected a distance >= 0, got {v}")
+            if self.name == "aperture_radius" and v == 0.0:    # as loading: Mitsuba's epsilon
+                v = float(np.finfo(np.float32).eps)
+            setattr(cam, self.name, v)
         else:
             if v < 0:
                 raise ValueError(f"{key}: expected a distance >= 0, got {v}")
@@ -323,6 +330,9 @@ def _sensor_params(camera) -> dict:
     out = {}
     for name in ("near_clip", "far_clip", "x_fov", "to_world"):
         if hasattr(camera, name):
+            out[name] = _SensorParam(camera, name)
+    if getattr(camera, "name", None) == "thinlens":
+        for name in ("aperture_radius", "focus_distance"):
             out[name] = _SensorParam(camera, name)
     if hasattr(camera, "pp"):
         for axis in "xy":
