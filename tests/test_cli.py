@@ -204,7 +204,7 @@ def test_version(capsys):
 @pytest.mark.parametrize("args, size", [(["--res", "20"], (20, 15)), (["--width", "40"], (40, 30)),
                                         (["--height", "12"], (16, 12)), (["--width", "9", "--height", "5"], (9, 5))])
 def test_film_size_options_apply_to_any_scene(tmp_path, monkeypatch, args, size):
-    """A scene file without <default>s for its size (the gallery's film is 480 x 360)."""
+    """Any scene file: the gallery's film (320 x 240, 4:3) resized by --res/--width/--height."""
     monkeypatch.chdir(tmp_path)
     scene = os.path.join(os.path.dirname(os.path.dirname(__file__)), "scenes", "materials_gallery.xml")
     d = {}
@@ -212,6 +212,45 @@ def test_film_size_options_apply_to_any_scene(tmp_path, monkeypatch, args, size)
                         np.zeros((size[1], size[0], 3), np.float32))
     assert cli.main(["render", scene, "-o", "g.exr", *args]) == 0
     assert tuple(d["size"]) == size
+
+
+CROPPED = """<scene version="3.0.0">
+  <sensor type="perspective"><float name="fov" value="40"/>
+    <film type="hdrfilm"><integer name="width" value="200"/><integer name="height" value="100"/>
+      <integer name="crop_offset_x" value="100"/><integer name="crop_offset_y" value="20"/>
+      <integer name="crop_width" value="80"/><integer name="crop_height" value="60"/></film>
+  </sensor>
+  <shape type="sphere"/><emitter type="constant"/>
+</scene>
+"""
+CROPPED_PBRT = """LookAt 0 0 4  0 0 0  0 1 0
+Camera "perspective" "float fov" 40
+Film "rgb" "integer xresolution" 200 "integer yresolution" 100 "integer pixelbounds" [100 180 20 80]
+WorldBegin
+LightSource "infinite" "rgb L" [1 1 1]
+Shape "sphere"
+"""
+
+
+@pytest.mark.parametrize("name, text", [("crop.xml", CROPPED), ("crop.pbrt", CROPPED_PBRT)])
+@pytest.mark.parametrize("args, window", [(["--res", "40"], (20, 4, 16, 12)), (["--height", "50"], (50, 10, 40, 30)),
+                                          (["--width", "10", "--height", "10"], (5, 2, 4, 6))])
+def test_film_size_options_scale_a_crop_window(tmp_path, monkeypatch, name, text, args, window):
+    """A film with a crop window in pixels (Mitsuba's crop_*, pbrt-v4's pixelbounds) keeps
+    the same part of the view: the window scales with the film (before, --res 40 on a
+    200 x 100 film cropped at x 100..180 was refused: 'exceeds the film's 40 pixels')."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / name).write_text(text)
+    got = {}
+
+    def render(s, **k):
+        film = s.sensors[0].film
+        got["window"] = (*film.crop_offset, *film.crop_size)
+        return np.zeros((film.crop_size[1], film.crop_size[0], 3), np.float32)
+
+    monkeypatch.setattr(pbr, "render", render)
+    assert cli.main(["render", name, "-o", "c.exr", *args]) == 0
+    assert got["window"] == window
 
 
 @pytest.mark.parametrize("args, message", [(["--res", "16", "--width", "3"], "give either --res or --width/--height"),
@@ -228,3 +267,11 @@ def test_write_failure_is_an_error_line(fake, capsys, out):
     assert cli.main(["render", "-o", out]) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"pbr: error: cannot write {out}") and "Traceback" not in err
+
+
+def test_write_under_a_file_names_it(fake, capsys):
+    """A file where the output's folder should be: said so (os.makedirs' own message was
+    'File exists')."""
+    open("plain", "w").close()
+    assert cli.main(["render", "-o", "plain/x.exr"]) == 2
+    assert capsys.readouterr().err == "pbr: error: cannot write plain/x.exr: plain is not a folder\n"

@@ -53,8 +53,11 @@ def test_transforms_of_any_mitsuba_variant():
     T4 = mi.scalar_rgb.Transform4f().translate([1, 2, 3]).scale(2.0)  # named AffineTransform4f
     m = Props({"to_world": T4}, "scene.s").transform("to_world")
     assert np.allclose(m, np.array(T4.matrix))
+    m = Props({"to_world": mi.Transform4f(T4.matrix.numpy().tolist())}, "scene.s").transform("to_world")  # JIT: (4, 4, 1)
+    assert np.allclose(m, np.array(T4.matrix))
     for T3 in (mi.scalar_rgb.ScalarTransform3f().scale([2, 3]).translate([0.5, 0.25]),
-               mi.ScalarTransform3f().scale([2, 3]).translate([0.5, 0.25])):
+               mi.ScalarTransform3f().scale([2, 3]).translate([0.5, 0.25]),
+               mi.Transform3f().scale([2, 3]).translate([0.5, 0.25])):       # a JIT variant's: (3, 3, 1)
         m = Props({"to_uv": T3}, "scene.t").transform("to_uv")
         expect = np.eye(4)
         expect[0, 0], expect[1, 1], expect[0, 3], expect[1, 3] = 2, 3, 1.0, 0.75

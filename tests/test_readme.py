@@ -65,6 +65,21 @@ def test_optional_blocks_are_dropped_only_without_their_module():
     assert without_optional(blocks, "os", "pbr.distributed") == blocks
 
 
+def _shows(readme_line: str, printed: str) -> bool:
+    """Whether a README line is what was printed: the whole line, or its start when the
+    README cuts it with '...'."""
+    if readme_line.endswith("..."):
+        return printed.startswith(readme_line[:-3])
+    return printed.rstrip() == readme_line.rstrip()
+
+
+def test_readme_output_lines_are_whole():
+    """A README line that leaves out the end of what was printed must say so with '...'
+    (the README once showed the 'valeu' error without its '(did you mean ...?)')."""
+    assert _shows("a: b", "a: b") and _shows("a: ...", "a: b (c)")
+    assert not _shows("a: b", "a: b (c)")
+
+
 def test_readme_python_blocks_run(tmp_path):
     with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as f:
         blocks = without_optional(readme_blocks(f.read()), "distributed", "from pbr import distributed")
@@ -80,5 +95,42 @@ def test_readme_python_blocks_run(tmp_path):
     for n, text in expected:
         printed = output_of_block(out.stdout, n).splitlines()
         for line in text.splitlines():
-            assert any(p.startswith(line.rstrip(". ")) for p in printed), (
+            assert any(_shows(line, p) for p in printed), (
                 f"README says block {n} prints {line!r}; it printed:\n" + "\n".join(printed))
+
+
+def test_newcomer_install_notes():
+    """Issue 16 item 6: the 'notebooks' extra installs Jupyter (``make notebooks`` installs
+    it and opens notebooks/), and the README says that the import name ``pbr`` is shared
+    with OpenStack's build tool and how to tell which one is installed."""
+    import tomllib
+    with open(os.path.join(ROOT, "pyproject.toml"), "rb") as f:
+        extras = tomllib.load(f)["project"]["optional-dependencies"]
+    assert any(r.startswith("jupyterlab") for r in extras["notebooks"])
+    make = open(os.path.join(ROOT, "Makefile"), encoding="utf-8").read()
+    target = make.split("\nnotebooks:", 1)[1].split("\n\n", 1)[0]
+    assert re.search(r"pip install .*\[[^\]]*notebooks[^\]]*\]", target) and "jupyter lab notebooks" in target
+    readme = open(os.path.join(ROOT, "README.md"), encoding="utf-8").read()
+    assert "make notebooks" in readme
+    note = readme.split("**The name `pbr`.**", 1)[1].split("\n\n", 1)[0]
+    assert "OpenStack" in note and "pbr.__file__" in note and "pip uninstall pbr" in note
+
+
+def test_readme_command_lines_parse():
+    """Every ``pbr ...`` line of the README's shell blocks is accepted by pbr's command-line
+    parser (as pasted, less the comment), and gives no option twice (the README once set
+    the sample count twice on one line)."""
+    import shlex
+    from pbr import cli
+    with open(os.path.join(ROOT, "README.md"), encoding="utf-8") as f:
+        lines = [ln.split("#", 1)[0].strip() for lang, code in readme_blocks(f.read()) if lang == "sh"
+                 for ln in code.splitlines()]
+    commands = [shlex.split(ln)[1:] for ln in lines if ln.startswith("pbr ")]
+    assert len(commands) >= 6
+    parser = cli.build_parser()
+    for args in commands:
+        options = [a.split("=")[0] for a in args if a.startswith("--")]
+        assert len(options) == len(set(options)), args
+        if args == ["--version"]:
+            continue
+        parser.parse_args(args)          # exits (SystemExit 2) on an unknown option or a bad value

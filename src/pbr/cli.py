@@ -75,7 +75,31 @@ def _film_size(args):
                     film[kw], film[kh] = width, max(1, round(width * h / w))
                 else:
                     film[kw], film[kh] = max(1, round(args.height * w / h)), args.height
+                _scale_crop(film, (w, h), (film[kw], film[kh]))
     return edit
+
+
+def _scaled_span(offset: int, size: int, old: int, new: int) -> tuple[int, int]:
+    """A pixel span [offset, offset + size) of an ``old``-pixel axis mapped onto ``new``
+    pixels: the same part of the view, at least one pixel, inside the axis."""
+    a = min(new - 1, round(offset * new / old))
+    b = min(new, max(a + 1, round((offset + size) * new / old)))
+    return a, b - a
+
+
+def _scale_crop(film: dict, old: tuple[int, int], new: tuple[int, int]) -> None:
+    """Resize a film's crop window in pixels with the film (Mitsuba's ``crop_*``, pbrt-v4's
+    ``pixelbounds``), so that --res renders the same part of the view; pbrt-v4's
+    ``cropwindow`` is in fractions and stays."""
+    if any(k in film for k in ("crop_offset_x", "crop_offset_y", "crop_width", "crop_height")):
+        for axis, (ko, kc) in enumerate((("crop_offset_x", "crop_width"), ("crop_offset_y", "crop_height"))):
+            o = int(film.get(ko, 0))
+            film[ko], film[kc] = _scaled_span(o, int(film.get(kc, old[axis] - o)), old[axis], new[axis])
+    if "pixelbounds" in film:
+        pb = [int(v) for v in np.asarray(film["pixelbounds"], np.float64).ravel()]
+        if len(pb) == 4:
+            (x0, nx), (y0, ny) = (_scaled_span(pb[2 * i], pb[2 * i + 1] - pb[2 * i], old[i], new[i]) for i in (0, 1))
+            film["pixelbounds"] = [x0, x0 + nx, y0, y0 + ny]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -94,7 +118,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--spp", type=int, default=0,
                    help="samples per pixel (0: the scene's own sample count)")
     r.add_argument("--res", type=int, metavar="N",
-                   help="image width N, the height following the film's aspect ratio (any scene)")
+                   help="image width N, the height following the film's aspect ratio (any scene; a crop "
+                        "window scales with the film)")
     r.add_argument("--width", type=int, help="image width (with --height: both exactly; alone: aspect kept)")
     r.add_argument("--height", type=int, help="image height (alone: aspect kept)")
     r.add_argument("--seed", type=int, default=0, help="random seed (default 0)")

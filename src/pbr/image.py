@@ -148,7 +148,10 @@ def write_image(path, img, tonemap: str = "clamp", exposure: float = 0.0,
     _check_finite(a, allow_nonfinite, path)
     parent = os.path.dirname(path)
     if parent:
-        os.makedirs(parent, exist_ok=True)
+        try:
+            os.makedirs(parent, exist_ok=True)
+        except FileExistsError:     # a file where a folder of the path should be
+            raise NotADirectoryError(f"cannot write {path}: {parent} is not a folder") from None
     try:
         if ext == ".exr":
             import OpenEXR

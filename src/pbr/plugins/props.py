@@ -220,7 +220,9 @@ class Props:
                 m = np.asarray(v, dtype=np.float64)
             except (TypeError, ValueError):
                 raise self.error(name, f"expected a transform (mi.ScalarTransform4f or 4x4 array), got {type(v).__name__}") from None
-        m = m.reshape(4, 4) if m.size == 16 else m
+        # a JIT variant's transform (``mi.Transform4f``, ``mi.Transform3f``) has a trailing
+        # width-1 axis: (4, 4, 1), (3, 3, 1)
+        m = m.reshape(4, 4) if m.size == 16 else (m.reshape(3, 3) if m.size == 9 else m)
         if m.shape == (3, 3):
             # A 2D transform (``mi.ScalarTransform3f``, e.g. a texture's ``to_uv``): its
             # linear part and translation go where Mitsuba's 3x3 -> 4x4 expansion puts them.

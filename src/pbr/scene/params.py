@@ -20,7 +20,8 @@ Three kinds of keys (``flags(key)`` tells them apart, with Mitsuba's ``mi.ParamF
   shadows) in the projective integrators. Not inside ``pbr.freeze`` (Mitsuba rebuilds its
   acceleration structure on the host, which a recording cannot replay).
 - the sensor: ``<sensor>.to_world`` (rigid), ``x_fov`` (degrees), ``near_clip``,
-  ``far_clip``, ``principal_point_offset_x``/``_y``; the film's ``size``, ``crop_size``
+  ``far_clip``, ``principal_point_offset_x``/``_y`` (a ``thinlens``: ``aperture_radius``,
+  ``focus_distance`` too); the film's ``size``, ``crop_size``
   and ``crop_offset`` are read-only (load the scene with another film to change them).
   Not differentiable in pbr, except a perspective camera's ``to_world`` (its pose: the
   projective integrators differentiate it; the attached value is kept as the camera's
@@ -32,7 +33,9 @@ projective integrators), ``<sensor>.shutter_open`` / ``shutter_open_time`` (no m
 blur), ``<emitter>.sampling_weight`` (pbr's light samplers weigh lights by power or its
 BVH), ``<emitter>.radiance.d65.*`` (an RGB emitter's D65 factor is fixed in pbr), and the
 ``object_...`` names of shapes Mitsuba merges by default (pbr never merges shapes: its
-keys are those of ``mi.load_dict(d, optimize=False)``).
+keys are those of ``mi.load_dict(d, optimize=False)``). Keys not exposed yet (plastic
+``eta``, light ``to_world``/``position``, texture ``to_uv``, tabulated spectra, ...) are
+listed in docs/porting_from_mitsuba.md.
 
 As in Mitsuba, iterating over the parameters gives ``(key, value)`` pairs, ``update(values)``
 skips keys it does not have, and ``keep`` takes a regular expression or a list of them.
@@ -91,6 +94,12 @@ def _matrix(value, key: str) -> np.ndarray:
 # Mitsuba's names of a shape's children, in the order its traversal visits them.
 SHAPE_CHILDREN = ("bsdf", "emitter", "interior_medium", "exterior_medium")
 
+# Mitsuba's names of the BSDFs nested in a BSDF (in declaration order), whatever their keys
+# in the dict or XML, and of a bump map's texture.
+NESTED_BSDFS = {"blendbsdf": ("bsdf_0", "bsdf_1"), "twosided": ("brdf_0", "brdf_1"),
+                "mask": ("nested_bsdf",), "normalmap": ("nested_bsdf",), "bumpmap": ("nested_bsdf",)}
+NESTED_TEXTURES = {"bumpmap": "nested_texture"}
+
 
 def mitsuba_key_paths(d: dict) -> dict:
     """Declared key path -> ``mi.traverse``'s key path, for the objects of scene dict
@@ -98,7 +107,9 @@ def mitsuba_key_paths(d: dict) -> dict:
 
     ``mi.traverse`` names a shape's children by role (``<shape>.bsdf``, ``.emitter``,
     ``.interior_medium``, ``.exterior_medium``) and a sensor's medium ``<sensor>.medium``,
-    whatever their keys in the dict (the XML reader names unnamed children ``emitter_0``).
+    whatever their keys in the dict (the XML reader names unnamed children ``emitter_0``),
+    and the BSDFs nested in a BSDF by position (``bsdf_0``/``bsdf_1`` in a blend,
+    ``brdf_0``/``brdf_1`` in a twosided, ``nested_bsdf``; :data:`NESTED_BSDFS`).
     It lists an object once, where the traversal first reaches it: the top-level entries
     in order, each followed by its children; so a BSDF or medium referenced by a shape
     (or the sensor) declared before it takes that shape's key (``s.bsdf``)."""
@@ -141,6 +152,34 @@ def mitsuba_key_paths(d: dict) -> dict:
         for name, k, c in sorted((x for x in children if x[0]), key=lambda x: order.index(x[0])):
             target = ids.get(c.get("id")) if c["type"] == "ref" else None
             reach(target[0] if target else f"{key}.{k}", f"{key}.{name}")
+
+    def renamed(path):
+        parts = path.split(".")
+        for n in range(len(parts), 0, -1):
+            if ".".join(parts[:n]) in out:
+                return ".".join([out[".".join(parts[:n])]] + parts[n:])
+        return path
+
+    def nested(v, path):
+        """A wrapper BSDF's inline children take Mitsuba's names (``bsdf_0``, ``brdf_0``,
+        ``nested_bsdf``, ...), below the parent's own Mitsuba path."""
+        for k, c in v.items():
+            if not (isinstance(c, dict) and "type" in c and c["type"] != "ref"):
+                continue
+            p = f"{path}.{k}" if path else k
+            kids = [(kk, cc) for kk, cc in c.items() if isinstance(cc, dict) and "type" in cc]
+            kinds = [ids.get(cc.get("id"), (None, None))[1] if cc["type"] == "ref" else cc["type"] for _, cc in kids]
+            bsdfs = [(kk, cc) for (kk, cc), t in zip(kids, kinds) if t in bsdf_names()]
+            texture = [(kk, cc) for (kk, cc), t in zip(kids, kinds) if t not in bsdf_names()]
+            named = list(zip(bsdfs, NESTED_BSDFS.get(c["type"], ())))
+            if c["type"] in NESTED_TEXTURES and texture:
+                named.append((texture[0], NESTED_TEXTURES[c["type"]]))
+            for (kk, cc), name in named:
+                if cc["type"] != "ref" and renamed(f"{p}.{kk}") != f"{renamed(p)}.{name}":
+                    out[f"{p}.{kk}"] = f"{renamed(p)}.{name}"
+            nested(c, p)
+
+    nested(d, "")
     return out
 
 
@@ -232,8 +271,8 @@ class _SensorParam(_Param):
             return t.Transform4f(np.asarray(cam.to_world, np.float64).tolist())
         if self.name.startswith("principal_point_offset_"):
             return t.Float(cam.pp["xy".index(self.name[-1])])
-        if self.name == "x_fov":
-            return t.Float(cam.x_fov)
+        if self.name in ("x_fov", "aperture_radius", "focus_distance"):
+            return t.Float(getattr(cam, self.name))
         if self.name.startswith("film."):
             film = cam.film
             w, h = film.size
@@ -271,6 +310,12 @@ class _SensorParam(_Param):
             if not 0.0 < v < 180.0:
                 raise ValueError(f"{key}: expected a field of view in (0, 180) degrees, got {v}")
             cam.x_fov = v
+        elif self.name in ("aperture_radius", "focus_distance"):
+            if not v >= 0.0:
+                raise ValueError(f"{key}: expected a distance >= 0, got {v}")
+            if self.name == "aperture_radius" and v == 0.0:    # as loading: Mitsuba's epsilon
+                v = float(np.finfo(np.float32).eps)
+            setattr(cam, self.name, v)
         else:
             if v < 0:
                 raise ValueError(f"{key}: expected a distance >= 0, got {v}")
@@ -285,6 +330,9 @@ def _sensor_params(camera) -> dict:
     out = {}
     for name in ("near_clip", "far_clip", "x_fov", "to_world"):
         if hasattr(camera, name):
+            out[name] = _SensorParam(camera, name)
+    if getattr(camera, "name", None) == "thinlens":
+        for name in ("aperture_radius", "focus_distance"):
             out[name] = _SensorParam(camera, name)
     if hasattr(camera, "pp"):
         for axis in "xy":
