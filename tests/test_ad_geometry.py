@@ -616,22 +616,3 @@ def _shift_z(mover, t):
     pos.z += t
     mover.p[mover.key] = dr.ravel(pos)
     mover.p.update()
-
-
-def test_analytic_shapes_with_gradients_warn():
-    """A sphere's silhouette is not sampled (not a mesh): the projective integrators say so."""
-    scene = pbr.load_dict({"type": "scene", "integrator": {"type": "direct_projective", "sppi": 0},
-                           "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 4, "height": 4}},
-                           "ball": {"type": "sphere", "center": [0, 0, 4], "radius": 0.5},
-                           "sky": {"type": "constant"}})
-    p = pbr.traverse(scene)
-    t = mi.Float(0.0)
-    dr.enable_grad(t)
-    m0 = np.array(p["ball.to_world"].matrix, dtype=np.float64).reshape(4, 4)
-    p["ball.to_world"] = mi.Transform4f().translate(mi.Vector3f(t, 0, 0)) @ mi.Transform4f(m0.tolist())
-    p.update()
-    img = pbr.render(scene, p, spp=4)
-    with pytest.warns(RuntimeWarning, match="'ball' is not a triangle mesh"):
-        dr.backward(dr.sum(img))
-    p["ball.to_world"] = mi.Transform4f(m0.tolist())     # detached again
-    p.update()

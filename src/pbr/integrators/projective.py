@@ -67,6 +67,7 @@ from ..spectrum import SampledWavelengths
 from .base import (BACKWARD, FORWARD, INTEGRATORS, PRIMAL, forward_derivative,
                    max_samples_per_pass)
 from .path import PathIntegrator
+from .silhouettes import CurveSet, curve_kinds
 
 # Offset beside an edge at which the two sides' radiance is estimated: a fraction of a
 # pixel (primary visibility) and an angle (radians) at the first hit.
@@ -137,6 +138,7 @@ class EdgeSet:
         n_vert = 0
         counts = []
         emitting = []    # welded vertex ranges of emissive shapes (see edge_weights)
+        analytic = []    # spheres, disks, cylinders (silhouettes.CurveSet)
         for i in scene.top_level_shapes():
             shape = geo.mi_shape(i)
             first = n_vert
@@ -164,12 +166,16 @@ class EdgeSet:
                     c.append(np.array([n_vert + (k + 2) % 4])); d.append(np.array([-1]))
                 counts.append(np.ones(4))
                 n_vert += 4
+            elif curve_kinds(shape):
+                analytic.append(shape)
             if scene.shape_emitter[i] and n_vert > first:
                 emitting.append((first, n_vert))
         self.n_vertices = n_vert
         self.emitting = emitting
-        self.count = len(np.concatenate(a)) if a else 0
-        if not self.count:
+        self.curves = CurveSet(analytic)
+        self.n_edges = len(np.concatenate(a)) if a else 0
+        self.count = self.n_edges + self.curves.count     # edges, then analytic curves
+        if not self.n_edges:
             return
         a, b, c, d = (np.concatenate(x) for x in (a, b, c, d))
         self.a, self.b, self.c = (mi.UInt32(x.astype(np.uint32)) for x in (a, b, c))
@@ -192,18 +198,55 @@ class EdgeSet:
         return acc * self.inv_count
 
     def gather(self, P, k, active):
-        """(a, b, c, d, has_d) of edges ``k`` from welded positions ``P``."""
+        """(a, b, c, d, has_d) of edges ``k`` (< ``n_edges``) from welded positions ``P``."""
         g = lambda idx: dr.gather(mi.Point3f, P, dr.gather(mi.UInt32, idx, k, active), active)  # noqa: E731
         return g(self.a), g(self.b), g(self.c), g(self.d), dr.gather(mi.Bool, self.has_d, k, active)
 
+    def state(self):
+        """The geometry the boundary points are made of, attached to the shapes'
+        parameters: (welded vertex positions, the analytic shapes' frames)."""
+        P = self.positions() if self.n_edges else None
+        return P, (self.curves.frames() if self.curves.count else None)
 
-def _edge_measure(x, a, b, y):
-    """(|e x w| |e| / |y - x|: the solid-angle length swept per unit of the edge
-    parameter at edge point y seen from x, the unit direction w from x to y)."""
+    def point(self, S, k, t, view, active):
+        """Boundary ``k`` (an edge, or past ``n_edges`` an analytic curve) at parameter
+        ``t`` in [0, 1) seen from ``view``, with geometry ``S`` (:meth:`state`): (the
+        point y, dy/dt, whether it is a silhouette from ``view``, a handle for
+        :meth:`attached`)."""
+        P, F = S
+        y, e, sil = mi.Point3f(0.0), mi.Vector3f(0.0), mi.Bool(False)
+        on_edge = active & (k < self.n_edges)
+        if self.n_edges:
+            a, b, c, d, has_d = self.gather(P, k, on_edge)
+            y, e = dr.fma(b - a, t, a), b - a
+            sil = on_edge & silhouette(view, a, b, c, d, has_d)
+        y_l = mi.Vector3f(0.0)
+        if self.curves.count:
+            on_curve = active & (k >= self.n_edges)
+            yc, ec, ok, y_l = self.curves.point(F, k - self.n_edges, t, view, on_curve)
+            y, e, sil = dr.select(on_curve, yc, y), dr.select(on_curve, ec, e), dr.select(on_curve, ok, sil)
+        return y, e, sil, y_l
+
+    def attached(self, S, k, t, y_l, active):
+        """The point of :meth:`point` moving with the shapes (``S`` attached)."""
+        P, F = S
+        y = mi.Point3f(0.0)
+        on_edge = active & (k < self.n_edges)
+        if self.n_edges:
+            a, b, _, _, _ = self.gather(P, k, on_edge)
+            y = dr.fma(b - a, t, a)
+        if self.curves.count:
+            on_curve = active & (k >= self.n_edges)
+            y = dr.select(on_curve, self.curves.attached(F, k - self.n_edges, y_l, on_curve), y)
+        return y
+
+
+def _edge_measure(x, e, y):
+    """(|e x w| / |y - x|: the solid-angle length swept per unit of the boundary's
+    parameter at its point y seen from x, e = dy/dt; the unit direction w from x to y)."""
     v = y - x
     r = dr.norm(v)
     w = v / r
-    e = b - a
     meas = dr.norm(dr.cross(w, e)) / r
     return dr.select(r > 0, meas, 0.0), w
 
@@ -279,14 +322,17 @@ class ProjectivePathIntegrator(PathIntegrator):
 
     def _warn_uncovered(self, scene) -> None:
         """Warn (once per shape) about shapes with gradients whose silhouettes pbr does
-        not sample (analytic shapes: their boundary terms are missing)."""
+        not sample (shapes other than meshes, rectangles, spheres, disks and cylinders:
+        their boundary terms are missing)."""
         warned = self.__dict__.setdefault("_warned", set())
         for shape in scene.mi_scene.shapes():
-            if shape.parameters_grad_enabled() and not shape.is_mesh() and shape.id() not in warned:
+            covered = (shape.is_mesh() or curve_kinds(shape) is not None
+                       or shape.shape_type() == int(mi.ShapeType.Rectangle))
+            if shape.parameters_grad_enabled() and not covered and shape.id() not in warned:
                 warned.add(shape.id())
-                warnings.warn(f"{self.name}: shape {shape.id()!r} is not a triangle mesh; its silhouettes are not "
-                              f"sampled, so the boundary part of its derivative is missing (use a mesh, e.g. an "
-                              f"'obj' or 'ply' sphere)", RuntimeWarning, stacklevel=4)
+                warnings.warn(f"{self.name}: the silhouettes of shape {shape.id()!r} are not sampled (pbr samples "
+                              f"those of meshes, rectangles, spheres, disks and cylinders), so the boundary part "
+                              f"of its derivative is missing", RuntimeWarning, stacklevel=4)
 
     def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0, sample=None):
         self._warn_uncovered(scene)
@@ -301,7 +347,7 @@ class ProjectivePathIntegrator(PathIntegrator):
         if n_p:
             self._primary(scene, sensor, seed, n_p, BACKWARD, g)
         if n_i:
-            self._distr = self._edge_distribution(scene, dr.detach(self.edges.positions()))
+            self._distr = self._edge_distribution(scene, _detached(self.edges.state()))
             super().render_backward(scene, grad_img, sensor, _mix(seed, 2), n_i, sample=self._first_hit_boundary)
 
     def render_forward(self, scene, sensor=0, seed=0, spp=0, sample=None):
@@ -318,7 +364,7 @@ class ProjectivePathIntegrator(PathIntegrator):
         if n_p:
             img = img + self._primary(scene, sensor, seed, n_p, FORWARD, None)
         if n_i:
-            self._distr = self._edge_distribution(scene, dr.detach(self.edges.positions()))
+            self._distr = self._edge_distribution(scene, _detached(self.edges.state()))
             img = img + super().render_forward(scene, sensor, _mix(seed, 2), n_i, sample=self._first_hit_boundary)
         return img
 
@@ -346,14 +392,8 @@ class ProjectivePathIntegrator(PathIntegrator):
         proj = _Projection(cam, w, h)
         edges = self.edges
         with dr.suspend_grad():
-            P = dr.detach(edges.positions())
-            k_all = dr.arange(mi.UInt32, edges.count)
-            a, b, c, d, has_d = edges.gather(P, k_all, True)
-            sil = silhouette(proj.o, a, b, c, d, has_d)
-            za, zb = proj.depth(a), proj.depth(b)
-            front = (za > cam.near_clip) & (zb > cam.near_clip)
-            length = dr.norm(proj.pixel(a) - proj.pixel(b))
-            pmf_w = dr.select(sil & front & dr.isfinite(length), length, 0.0)
+            S = _detached(edges.state())
+            pmf_w = self._projected_lengths(cam, proj, edges, S)
             total = float(dr.sum(pmf_w)[0])
         if not total > 0.0:
             return None if mode == BACKWARD else dr.zeros(mi.TensorXf, (h, w, 3))
@@ -363,7 +403,7 @@ class ProjectivePathIntegrator(PathIntegrator):
         per_pass = max(1, min(n, max_samples_per_pass()))
         acc = dr.zeros(mi.Float, w * h * 3) if mode == FORWARD else None
         for first in range(0, n, per_pass):      # passes of bounded memory
-            acc = self._primary_pass(scene, cam, proj, edges, P, distr, fx, fy, n, first, min(per_pass, n - first),
+            acc = self._primary_pass(scene, cam, proj, edges, S, distr, fx, fy, n, first, min(per_pass, n - first),
                                      seed, mode, g, acc)
             dr.eval(acc) if acc is not None else dr.eval()
         if mode == BACKWARD:
@@ -376,7 +416,32 @@ class ProjectivePathIntegrator(PathIntegrator):
                 dr.scatter(out, rgb[ch], pixel * 3 + ch)
             return mi.TensorXf(out, (h, w, 3))
 
-    def _primary_pass(self, scene, cam, proj, edges, P, distr, fx, fy, n, first, count, seed, mode, g, acc):
+    @staticmethod
+    def _projected_lengths(cam, proj, edges, S, n_seg=32):
+        """Per boundary, its length on the film where it is a silhouette from the pinhole
+        in front of the camera (0 elsewhere): the primary term's choice of boundary.
+        Analytic curves are measured as polylines of ``n_seg`` segments."""
+        n, ne = edges.count, edges.n_edges
+        k = dr.repeat(dr.arange(mi.UInt32, n), n_seg + 1)
+        j = dr.tile(dr.arange(mi.UInt32, n_seg + 1), n)
+        # edges: their two ends (the first and last of the n_seg + 1 points)
+        t = dr.select(k < ne, dr.select(j == 0, 0.0, 1.0), mi.Float(j) / n_seg)
+        y, _, sil, _ = edges.point(S, k, t, proj.o, True)
+        front = sil & (proj.depth(y) > cam.near_clip)
+        x = proj.pixel(y)
+        seg = dr.arange(mi.UInt32, n * n_seg)
+        i0 = seg // n_seg * (n_seg + 1) + seg % n_seg
+        g = lambda v, i: dr.gather(type(v), v, i)  # noqa: E731
+        d = dr.norm(g(x, i0 + 1) - g(x, i0))
+        ok = g(front, i0) & g(front, i0 + 1) & dr.isfinite(d)
+        kseg = seg // n_seg
+        # an edge is counted once (its segment 0 joins its two ends)
+        ok &= (kseg >= ne) | (seg % n_seg == 0)
+        out = dr.zeros(mi.Float, n)
+        dr.scatter_reduce(dr.ReduceOp.Add, out, dr.select(ok, d, 0.0), kseg)
+        return out
+
+    def _primary_pass(self, scene, cam, proj, edges, S, distr, fx, fy, n, first, count, seed, mode, g, acc):
         """Samples ``first`` .. ``first + count`` of the ``n`` of the primary term."""
         w, h = cam.film.size
         rf = cam.film.rfilter
@@ -386,13 +451,13 @@ class ProjectivePathIntegrator(PathIntegrator):
             wl = SampledWavelengths.sample_visible(rng.next_float32())
             k, pmf = distr.sample_pmf(rng.next_float32())
             t = rng.next_float32()
-            a, b, c, d, has_d = edges.gather(P, k, True)
-            y = dr.fma(b - a, t, a)
-            x, dx = proj.pixel(y), proj.pixel_dt(a, b - a, t)
+            y, e, sil, y_l = edges.point(S, k, t, proj.o, True)
+            x, dx = proj.pixel(y), proj.pixel_dt(y, e, 0.0)
             speed = dr.norm(dx)
             nrm = mi.Vector2f(-dx.y, dx.x) / speed
             # the image integrates over the film only (samples outside it are dropped)
-            ok = (pmf > 0) & (speed > 0) & (x.x >= 0) & (x.x < w) & (x.y >= 0) & (x.y < h)
+            ok = (pmf > 0) & sil & (proj.depth(y) > cam.near_clip) & (speed > 0)
+            ok &= (x.x >= 0) & (x.x < w) & (x.y >= 0) & (x.y < h)
             weight = dr.select(ok, speed / (pmf * n), 0.0)
             L = []
             self.face_first_hit = True       # past the rim of interpolated normals (face_the_ray)
@@ -419,10 +484,9 @@ class ProjectivePathIntegrator(PathIntegrator):
                     inside &= fw != 0
                     taps.append((mi.UInt32(py * w + px), fw, inside))
         with dr.resume_grad():
-            Pa = edges.positions()
-            aa, ba, _, _, _ = edges.gather(Pa, k, ok)
+            y_a = edges.attached(edges.state(), k, t, y_l, ok)
             proj_ad = _Projection(cam, w, h, attached=True) if cam.to_world_ad is not None else proj
-            vn = dr.dot(proj_ad.pixel(dr.fma(ba - aa, t, aa)), dr.detach(nrm))
+            vn = dr.dot(proj_ad.pixel(y_a), dr.detach(nrm))
         if mode == BACKWARD:
             with dr.suspend_grad():
                 g_xyz = mi.Array3f(0.0)
@@ -453,7 +517,7 @@ class ProjectivePathIntegrator(PathIntegrator):
         hit = active & si.is_valid()
         bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
         on = hit & bsdfs.smooth(bsdf_id, hit) & (self.max_depth < 0 or self.max_depth > 1)
-        P = dr.detach(edges.positions())
+        S = _detached(edges.state())
         x = dr.detach(si.p)
         # Resampled importance sampling (RIS) of the edge point: CANDIDATES points drawn by
         # edge length, one kept in proportion to target / pmf, the target being the edge
@@ -465,22 +529,20 @@ class ProjectivePathIntegrator(PathIntegrator):
         for _ in range(CANDIDATES):
             k_i, pmf_i = self._distr.sample_pmf(rng.next_float32())
             t_i = rng.next_float32()
-            a, b, c, d, has_d = edges.gather(P, k_i, on)
-            y = dr.fma(b - a, t_i, a)
-            meas, wdir = _edge_measure(x, a, b, y)
-            tgt = dr.select(on & silhouette(x, a, b, c, d, has_d), meas, 0.0) * (floor + self._toward_light(x, wdir))
+            y, e, sil, _ = edges.point(S, k_i, t_i, x, on)
+            meas, wdir = _edge_measure(x, e, y)
+            tgt = dr.select(on & sil, meas, 0.0) * (floor + self._toward_light(x, wdir))
             w_i = dr.select(pmf_i > 0, tgt / pmf_i, 0.0)
             wsum += w_i
             take = rng.next_float32() * wsum < w_i
             k, t, target = dr.select(take, k_i, k), dr.select(take, t_i, t), dr.select(take, tgt, target)
         on &= target > 0
-        a, b, c, d, has_d = edges.gather(P, k, on)
-        y = dr.fma(b - a, t, a)
+        y, e, _, y_l = edges.point(S, k, t, x, on)
         r = dr.norm(y - x)
         wdir = (y - x) / r
-        cr = dr.cross(wdir, dr.normalize(b - a))
+        cr = dr.cross(wdir, dr.normalize(e))
         nw = cr / dr.norm(cr)
-        meas, _ = _edge_measure(x, a, b, y)
+        meas, _ = _edge_measure(x, e, y)
         weight = dr.select(on, meas * wsum / (CANDIDATES * target), 0.0)
         si_d = dr.detach(si)
         ctx = ShadingContext(si_d, wl)
@@ -493,9 +555,8 @@ class ProjectivePathIntegrator(PathIntegrator):
             g.append(f * Li)
         jump = dr.select(on, (g[0] - g[1]) * weight, 0.0)
         with dr.resume_grad():
-            Pa = edges.positions()
-            aa, ba, _, _, _ = edges.gather(Pa, k, on)
-            vn = dr.dot(dr.fma(ba - aa, t, aa) - si.p, dr.detach(nw)) / dr.detach(r)
+            y_a = edges.attached(edges.state(), k, t, y_l, on)
+            vn = dr.dot(y_a - si.p, dr.detach(nw)) / dr.detach(r)
             term = jump * vn
             if mode == BACKWARD:
                 dr.backward_from(dL * term, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
@@ -515,35 +576,42 @@ class ProjectivePathIntegrator(PathIntegrator):
             out |= (dist2 <= rad * rad) | (dr.dot(v, wdir) >= cos_max * dr.sqrt(dist2))
         return dr.select(out, 1.0, 0.0)
 
-    def _edge_distribution(self, scene, P):
-        """Edges for the first-hit term: in proportion to length, times ``LIGHT_BOOST`` for
-        the edges that are silhouettes seen from a vertex or the centroid of an emissive
-        shape (those that cast shadow boundaries of small lights). Every edge keeps a
-        nonzero probability, so the estimator stays unbiased; this is a cheap stand-in
-        for Mitsuba's guiding structures."""
+    def _edge_distribution(self, scene, S):
+        """Boundaries for the first-hit term: in proportion to length, times
+        ``LIGHT_BOOST`` for the edges that are silhouettes seen from a vertex or the
+        centroid of an emissive shape (those that cast shadow boundaries of small lights)
+        and for the analytic curves (silhouettes from almost everywhere). Every boundary
+        keeps a nonzero probability, so the estimator stays unbiased; this is a cheap
+        stand-in for Mitsuba's guiding structures."""
         edges = self.edges
+        P, F = S
         with dr.suspend_grad():
-            k_all = dr.arange(mi.UInt32, edges.count)
-            a, b, c, d, has_d = edges.gather(P, k_all, True)
-            weight = dr.norm(b - a)
-            pts = np.array(P, dtype=np.float64).reshape(-1, 3)
             self._spheres = []
-            for lo, hi in edges.emitting:
-                q = pts[lo:hi]
-                centre = q.mean(axis=0)
-                self._spheres.append((*centre.tolist(), float(np.linalg.norm(q - centre, axis=1).max()) * 1.001))
             # emitters the edge table does not hold (environment, other shapes' lights):
             # every direction may see light
             held = len(self._scene_emissive_shapes(scene)) == len(edges.emitting)
             self._all_directions = bool(scene.lights.has_infinite) or not held or not edges.emitting
-            if edges.emitting:
-                lights = [pts[lo:hi] for lo, hi in edges.emitting]
-                lights = np.concatenate(lights + [np.mean(x, axis=0, keepdims=True) for x in lights])
-                mark = mi.Bool(False)
-                for q in lights.tolist():
-                    mark |= silhouette(mi.Point3f(*q), a, b, c, d, has_d)
-                weight = weight * dr.select(mark, LIGHT_BOOST, 1.0)
-            return mi.DiscreteDistribution(weight)
+            weights = []
+            if edges.n_edges:
+                k_all = dr.arange(mi.UInt32, edges.n_edges)
+                a, b, c, d, has_d = edges.gather(P, k_all, True)
+                weight = dr.norm(b - a)
+                pts = np.array(P, dtype=np.float64).reshape(-1, 3)
+                for lo, hi in edges.emitting:
+                    q = pts[lo:hi]
+                    centre = q.mean(axis=0)
+                    self._spheres.append((*centre.tolist(), float(np.linalg.norm(q - centre, axis=1).max()) * 1.001))
+                if edges.emitting:
+                    lights = [pts[lo:hi] for lo, hi in edges.emitting]
+                    lights = np.concatenate(lights + [np.mean(x, axis=0, keepdims=True) for x in lights])
+                    mark = mi.Bool(False)
+                    for q in lights.tolist():
+                        mark |= silhouette(mi.Point3f(*q), a, b, c, d, has_d)
+                    weight = weight * dr.select(mark, LIGHT_BOOST, 1.0)
+                weights.append(np.array(weight, np.float64))
+            if edges.curves.count:
+                weights.append(LIGHT_BOOST * edges.curves.lengths(F))
+            return mi.DiscreteDistribution(mi.Float(np.concatenate(weights).astype(np.float32)))
 
     def _incident(self, scene, rng, ray, wl, active):
         """Radiance arriving along ``ray`` (the rest of a path: one segment fewer than
@@ -643,6 +711,12 @@ class _Projection:
         X, Y = dr.fma(D.x, t, A.x), dr.fma(D.y, t, A.y)
         inv2 = dr.rcp(z * z)
         return mi.Vector2f(self.kx * (D.x * z - X * D.z) * inv2, self.ky * (D.y * z - Y * D.z) * inv2)
+
+
+def _detached(S):
+    """:meth:`EdgeSet.state` without its gradients."""
+    P, F = S
+    return (None if P is None else dr.detach(P)), (None if F is None else tuple(dr.detach(f) for f in F))
 
 
 def _filter_norms(rf, n: int) -> mi.Float:
