@@ -9,7 +9,8 @@ integral along the moving boundary of (the jump of the integrand) x (the boundar
 normal velocity) (Li et al. 2018, "Differentiable Monte Carlo Ray Tracing through Edge
 Sampling"; Zhang et al. 2023, "Projective Sampling for Differentiable Rendering of
 Geometry", whose integrators these follow in name and parameters). pbr estimates two such
-boundaries by sampling points on silhouette edges of triangle meshes:
+boundaries by sampling points on silhouette edges of triangle meshes and on the
+silhouette curves of analytic shapes:
 
 * **primary visibility** (``sppp`` samples per pixel): the edges that are silhouettes
   from the pinhole, projected onto the film; an edge is chosen in proportion to its
@@ -34,12 +35,15 @@ edges between coplanar faces are never silhouettes and are dropped. An edge is a
 silhouette seen from a point p when its two faces' third vertices lie on the same side of
 the plane through p and the edge; boundary edges (one face) always are. The welded
 positions are the mean of the split copies (attached), so a vertex's gradient is shared
-among its copies.
+among its copies. Analytic shapes (``sphere``, ``disk``, ``cylinder``; ``silhouettes.py``)
+add curves after the edges, whose points depend on the viewpoint (a sphere's circle of
+tangency, a cylinder's grazing side lines) or not (rims); each is a boundary ``k`` with
+a parameter t in [0, 1), like an edge, so both terms choose among edges and curves alike.
 
 Interior derivatives are ``prb``'s, with light samples in solid angle (the direction
 toward an area light is fixed when the shading point moves), which is the measure the
 first-hit boundary term is written in. Not handled (documented in docs/inverse.md):
-boundaries of analytic shapes other than rectangles (sphere, disk, cylinder: use a mesh),
+boundaries of curves (``linearcurve``, ``bsplinecurve``) and SDF grids (a warning says so),
 discontinuities after the first bounce, hard shadows of point and spot lights (their
 boundary lies on the receiver, not in a direction), non-pinhole cameras, and guiding
 (``guiding`` and its options are accepted and ignored).
@@ -127,9 +131,10 @@ def _mesh_edges(faces: np.ndarray, pos: np.ndarray):
 
 
 class EdgeSet:
-    """The candidate silhouette edges of a scene (see the module docstring): topology built
-    once per geometry, positions gathered (attached) from the shapes' current vertex
-    buffers by :meth:`positions`."""
+    """The candidate boundaries of a scene (see the module docstring): mesh edges, then
+    the analytic shapes' curves (:class:`CurveSet`). Topology built once per geometry;
+    positions and frames gathered (attached) from the shapes' current parameters by
+    :meth:`state`."""
 
     def __init__(self, scene):
         geo = scene.geometry
@@ -263,8 +268,8 @@ class ProjectivePathIntegrator(PathIntegrator):
     """``prb_projective`` (Mitsuba's name and parameters): ``prb``'s path tracer whose
     derivatives w.r.t. geometry (mesh vertices, shape ``to_world``) include the boundary
     terms of primary visibility and of visibility at the first surface hit, estimated by
-    sampling silhouette edges (see docs/inverse.md, "Geometry"). Primal images are
-    ``prb``'s.
+    sampling silhouette edges of meshes and silhouette curves of spheres, disks and
+    cylinders (see docs/inverse.md, "Geometry"). Primal images are ``prb``'s.
 
     =============  ======  =======  ==============================================================
     name           type    default  meaning
@@ -421,25 +426,23 @@ class ProjectivePathIntegrator(PathIntegrator):
         """Per boundary, its length on the film where it is a silhouette from the pinhole
         in front of the camera (0 elsewhere): the primary term's choice of boundary.
         Analytic curves are measured as polylines of ``n_seg`` segments."""
-        n, ne = edges.count, edges.n_edges
-        k = dr.repeat(dr.arange(mi.UInt32, n), n_seg + 1)
-        j = dr.tile(dr.arange(mi.UInt32, n_seg + 1), n)
-        # edges: their two ends (the first and last of the n_seg + 1 points)
-        t = dr.select(k < ne, dr.select(j == 0, 0.0, 1.0), mi.Float(j) / n_seg)
-        y, _, sil, _ = edges.point(S, k, t, proj.o, True)
-        front = sil & (proj.depth(y) > cam.near_clip)
-        x = proj.pixel(y)
-        seg = dr.arange(mi.UInt32, n * n_seg)
-        i0 = seg // n_seg * (n_seg + 1) + seg % n_seg
-        g = lambda v, i: dr.gather(type(v), v, i)  # noqa: E731
-        d = dr.norm(g(x, i0 + 1) - g(x, i0))
-        ok = g(front, i0) & g(front, i0 + 1) & dr.isfinite(d)
-        kseg = seg // n_seg
-        # an edge is counted once (its segment 0 joins its two ends)
-        ok &= (kseg >= ne) | (seg % n_seg == 0)
-        out = dr.zeros(mi.Float, n)
-        dr.scatter_reduce(dr.ReduceOp.Add, out, dr.select(ok, d, 0.0), kseg)
-        return out
+        parts = []
+        for first, count, n in ((0, edges.n_edges, 1), (edges.n_edges, edges.curves.count, n_seg)):
+            if not count:
+                continue
+            k = dr.repeat(dr.arange(mi.UInt32, count), n + 1) + first
+            j = dr.tile(dr.arange(mi.UInt32, n + 1), count)
+            y, _, sil, _ = edges.point(S, k, mi.Float(j) / n, proj.o, True)
+            front = sil & (proj.depth(y) > cam.near_clip)
+            x = proj.pixel(y)
+            seg = dr.arange(mi.UInt32, count * n)
+            i0 = seg // n * (n + 1) + seg % n
+            d = dr.norm(dr.gather(mi.Point2f, x, i0 + 1) - dr.gather(mi.Point2f, x, i0))
+            ok = dr.gather(mi.Bool, front, i0) & dr.gather(mi.Bool, front, i0 + 1) & dr.isfinite(d)
+            out = dr.zeros(mi.Float, count)
+            dr.scatter_reduce(dr.ReduceOp.Add, out, dr.select(ok, d, 0.0), seg // n)
+            parts.append(np.array(out, np.float32))
+        return mi.Float(np.concatenate(parts))
 
     def _primary_pass(self, scene, cam, proj, edges, S, distr, fx, fy, n, first, count, seed, mode, g, acc):
         """Samples ``first`` .. ``first + count`` of the ``n`` of the primary term."""

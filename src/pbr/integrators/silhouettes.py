@@ -29,6 +29,9 @@ import mitsuba as mi
 import numpy as np
 
 SPHERE, RIM, SIDE = 0, 1, 2
+# A viewpoint closer than this (squared local distance to the centre or the axis) is
+# taken to be on the surface: no silhouette from there.
+ON_SURFACE = 1.0 + 1e-3
 
 
 def curve_kinds(shape):
@@ -122,7 +125,9 @@ class CurveSet:
         e_side = mi.Vector3f(0.0, 0.0, 1.0)
         y_l = dr.select(kind == SPHERE, y_sph, dr.select(kind == RIM, y_rim, y_side))
         e_l = dr.select(kind == SPHERE, e_sph, dr.select(kind == RIM, e_rim, e_side))
-        ok = active & dr.select(kind == SPHERE, d2 > 1.0, dr.select(kind == RIM, True, r2 > 1.0))
+        # (not from the surface itself: a hit point on it sees its tangent plane, where
+        # the cosine is 0 and no light jumps)
+        ok = active & dr.select(kind == SPHERE, d2 > ON_SURFACE, dr.select(kind == RIM, True, r2 > ON_SURFACE))
         m = _rows(M, base)
         return mi.Point3f(_apply(m, y_l, 1.0)), _apply(m, e_l, 0.0), ok, y_l
 
