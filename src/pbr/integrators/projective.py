@@ -14,7 +14,8 @@ silhouette curves of analytic shapes:
 
 * **primary visibility** (``sppp`` samples per pixel): the edges that are silhouettes
   from the pinhole, projected onto the film; an edge is chosen in proportion to its
-  projected length and a point uniformly on it. The jump is the radiance just beside the
+  projected length inside the film (plus ``OFF_FILM`` of the rest) and a point uniformly
+  on it. The jump is the radiance just beside the
   projected edge on either side (two camera rays, the integrator's own estimator with the
   same random numbers), weighted by the pixel filter of each pixel the point falls on.
 * **visibility at the first surface hit** (``sppi`` samples per pixel): from a camera
@@ -76,6 +77,8 @@ from .silhouettes import CurveSet, curve_kinds
 # Offset beside an edge at which the two sides' radiance is estimated: a fraction of a
 # pixel (primary visibility) and an angle (radians) at the first hit.
 PIXEL_EPS = 1e-3
+# Primary term: weight of a boundary's length outside the film in its probability.
+OFF_FILM = 0.01
 ANGLE_EPS = 1e-4
 # Two faces are coplanar (their edge is never a silhouette) below this |sin| of the angle
 # between the fourth vertex and the first face's plane.
@@ -425,7 +428,11 @@ class ProjectivePathIntegrator(PathIntegrator):
     def _projected_lengths(cam, proj, edges, S, n_seg=32):
         """Per boundary, its length on the film where it is a silhouette from the pinhole
         in front of the camera (0 elsewhere): the primary term's choice of boundary.
-        Analytic curves are measured as polylines of ``n_seg`` segments."""
+        Analytic curves are measured as polylines of ``n_seg`` segments. Only the part
+        inside the film counts (plus ``OFF_FILM`` of the rest: a curve may leave its
+        polyline), so that edges reaching far outside it (a floor's) do not take the
+        samples of the shapes in view."""
+        w, h = cam.film.size
         parts = []
         for first, count, n in ((0, edges.n_edges, 1), (edges.n_edges, edges.curves.count, n_seg)):
             if not count:
@@ -437,7 +444,9 @@ class ProjectivePathIntegrator(PathIntegrator):
             x = proj.pixel(y)
             seg = dr.arange(mi.UInt32, count * n)
             i0 = seg // n * (n + 1) + seg % n
-            d = dr.norm(dr.gather(mi.Point2f, x, i0 + 1) - dr.gather(mi.Point2f, x, i0))
+            x0, x1 = dr.gather(mi.Point2f, x, i0), dr.gather(mi.Point2f, x, i0 + 1)
+            full = dr.norm(x1 - x0)
+            d = _clipped_fraction(x0, x1, w, h) * full + OFF_FILM * full
             ok = dr.gather(mi.Bool, front, i0) & dr.gather(mi.Bool, front, i0 + 1) & dr.isfinite(d)
             out = dr.zeros(mi.Float, count)
             dr.scatter_reduce(dr.ReduceOp.Add, out, dr.select(ok, d, 0.0), seg // n)
@@ -714,6 +723,19 @@ class _Projection:
         X, Y = dr.fma(D.x, t, A.x), dr.fma(D.y, t, A.y)
         inv2 = dr.rcp(z * z)
         return mi.Vector2f(self.kx * (D.x * z - X * D.z) * inv2, self.ky * (D.y * z - Y * D.z) * inv2)
+
+
+def _clipped_fraction(x0, x1, w, h):
+    """The fraction of film segment x0 -> x1 inside [0, w] x [0, h] (Liang-Barsky)."""
+    d = x1 - x0
+    t0, t1 = mi.Float(0.0), mi.Float(1.0)
+    out = mi.Bool(False)
+    for p, q in ((-d.x, x0.x), (d.x, w - x0.x), (-d.y, x0.y), (d.y, h - x0.y)):
+        r = q / p       # the segment is inside where p t <= q
+        t0 = dr.select(p < 0, dr.maximum(t0, r), t0)
+        t1 = dr.select(p > 0, dr.minimum(t1, r), t1)
+        out |= (p == 0) & (q < 0)
+    return dr.select(out | (t1 <= t0), 0.0, t1 - t0)
 
 
 def _detached(S):
