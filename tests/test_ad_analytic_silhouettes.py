@@ -309,3 +309,13 @@ def test_sphere_in_a_glossy_reflection():
     assert _z(ad, fd) < Z_MAX and abs(ad[0] - fd[0]) < 0.1 * abs(fd[0]), (ad, fd)
     assert _z(ad, ref) < Z_MAX, (ad, ref)
     assert _z(primary, fd) > Z_MAX, (primary, fd)
+
+
+def test_primary_choice_counts_the_length_inside_the_film():
+    """The primary term chooses a boundary by its length inside the film: segments
+    inside, crossing, outside and parallel to a side of a 10x8 film."""
+    from pbr.integrators.projective import _clipped_fraction
+    x0 = mi.Point2f([1, -5, -5, 2, 20], [1, 4, -1, 9, 20])
+    x1 = mi.Point2f([3, 15, -1, 8, 30], [2, 4, -3, 9, 25])
+    frac = np.array(_clipped_fraction(x0, x1, 10, 8))
+    assert np.allclose(frac, [1.0, 0.5, 0.0, 0.0, 0.0]), frac
