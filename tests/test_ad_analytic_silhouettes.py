@@ -180,7 +180,8 @@ def test_curves_lie_on_the_silhouettes():
     """Every sampled point of a curve is on its shape and, for silhouettes, the ray from
     the viewpoint grazes the surface there (sphere: (y - c) . (y - o) = 0; cylinder
     side: the radial direction is perpendicular to the ray); the tangent dy/dt matches
-    a finite difference of the points."""
+    a finite difference of the points; no silhouette from inside a sphere or cylinder
+    or from a disk's own plane."""
     from pbr.integrators.silhouettes import CurveSet
     mi_scene = mi.load_dict({"type": "scene",
                              "s": {"type": "sphere", "center": [0.3, -0.2, 0.1], "radius": 0.7},
@@ -213,9 +214,15 @@ def test_curves_lie_on_the_silhouettes():
     # tangents
     assert np.allclose((y2 - y) / 1e-3, e, rtol=2e-2, atol=2e-2)
     # from inside the sphere and inside the (infinite) cylinder: no silhouettes there
-    _, _, ok_in, _ = curves.point(F, k, t, mi.Point3f(0.05, 0.05, 0.0), True)
+    _, _, ok_in, _ = curves.point(F, k, t, mi.Point3f(0.05, 0.05, 0.1), True)
     ok_in = np.array(ok_in)
     assert not ok_in[kind == 0].any() and not ok_in[kind == 2].any() and ok_in[kind == 1].all()
+    # from a point of the disk (its plane, z = 0), its rim is no silhouette
+    _, _, ok_disk, _ = curves.point(F, k, t, mi.Point3f(0.1, 1.1, 0.0), True)
+    ok_disk = np.array(ok_disk)
+    slot = np.repeat(curves.slot_np, n)
+    disk_slot = [i for i, sh in enumerate(curves.shapes) if sh.id() == "d"][0]
+    assert not ok_disk[slot == disk_slot].any() and ok_disk[(kind == 1) & (slot != disk_slot)].all()
 
 
 def test_unsupported_shapes_with_gradients_warn(tmp_path):

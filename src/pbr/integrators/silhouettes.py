@@ -126,8 +126,10 @@ class CurveSet:
         y_l = dr.select(kind == SPHERE, y_sph, dr.select(kind == RIM, y_rim, y_side))
         e_l = dr.select(kind == SPHERE, e_sph, dr.select(kind == RIM, e_rim, e_side))
         # (not from the surface itself: a hit point on it sees its tangent plane, where
-        # the cosine is 0 and no light jumps)
-        ok = active & dr.select(kind == SPHERE, d2 > ON_SURFACE, dr.select(kind == RIM, True, r2 > ON_SURFACE))
+        # the cosine is 0 and no light jumps; nor a rim from its own plane, a disk's hit
+        # points)
+        ok = active & dr.select(kind == SPHERE, d2 > ON_SURFACE,
+                                dr.select(kind == RIM, dr.abs(o.z - prm) > ON_SURFACE - 1.0, r2 > ON_SURFACE))
         m = _rows(M, base)
         return mi.Point3f(_apply(m, y_l, 1.0)), _apply(m, e_l, 0.0), ok, y_l
 
