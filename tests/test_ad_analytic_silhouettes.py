@@ -326,3 +326,16 @@ def test_primary_choice_counts_the_length_inside_the_film():
     x1 = mi.Point2f([3, 15, -1, 8, 30], [2, 4, -3, 9, 25])
     frac = np.array(_clipped_fraction(x0, x1, 10, 8))
     assert np.allclose(frac, [1.0, 0.5, 0.0, 0.0, 0.0]), frac
+
+
+def test_sphere_curve_follows_mitsubas_radius():
+    """A sphere whose to_world holds a non-uniform scale is rendered by Mitsuba as a
+    sphere of radius |to_world (1, 0, 0)| (with a warning): its silhouette is that
+    sphere's, not an ellipsoid's."""
+    from pbr.integrators.silhouettes import CurveSet
+    shape = mi.load_dict({"type": "sphere", "to_world": T().translate([0.5, 0, 0]).scale([0.5, 1.5, 0.5])})
+    curves = CurveSet([shape])
+    t = mi.Float(np.linspace(0, 1, 16, endpoint=False).astype(np.float32))
+    y, _, ok, _ = curves.point(curves.frames(), dr.zeros(mi.UInt32, 16), t, mi.Point3f(0.5, 4.0, 0.0), True)
+    y = np.array(y, np.float64).reshape(3, -1).T
+    assert bool(dr.all(ok)) and np.allclose(np.linalg.norm(y - [0.5, 0, 0], axis=1), 0.5, atol=1e-5)

@@ -5,8 +5,8 @@ A triangle mesh's silhouettes lie on its edges, a fixed set; an analytic shape's
 on the viewpoint. Each shape contributes curves parametrised by t in [0, 1), worked out
 in the shape's local frame (Mitsuba's: unit sphere at the origin, unit disk in z = 0,
 cylinder of radius 1 from z = 0 to z = 1) from the viewpoint brought into that frame,
-then mapped by ``to_world`` (an affine map keeps lines tangent to a surface tangent, so
-non-uniform scales are handled too):
+then mapped by ``to_world`` (an affine map keeps lines tangent to a surface tangent;
+a sphere's frame is Mitsuba's: its radius |to_world (1, 0, 0)| about the translation):
 
 * sphere: the circle where rays from the viewpoint graze the sphere (none from inside);
 * disk: its rim (a boundary: a discontinuity from every viewpoint off its plane);
@@ -87,7 +87,18 @@ class CurveSet:
         for s, shape in enumerate(self.shapes):
             T = mi.traverse(shape)["to_world"]
             m = T.matrix
-            inv = dr.detach(T.inverse().matrix)
+            if shape.shape_type() == int(mi.ShapeType.Sphere):
+                # Mitsuba renders a sphere of radius |to_world (1, 0, 0)| about the
+                # translation, whatever else to_world holds (it warns about
+                # non-uniform scales); rotations move no silhouette
+                r = dr.norm(mi.Vector3f(m[0][0], m[1][0], m[2][0]))
+                z = mi.Float(0.0)
+                m = [[r, z, z, m[0][3]], [z, r, z, m[1][3]], [z, z, r, m[2][3]]]
+                ir = dr.detach(dr.rcp(r))
+                inv = [[ir, z, z, -dr.detach(m[0][3]) * ir], [z, ir, z, -dr.detach(m[1][3]) * ir],
+                       [z, z, ir, -dr.detach(m[2][3]) * ir]]
+            else:
+                inv = dr.detach(T.inverse().matrix)
             for r in range(3):
                 for c in range(4):
                     i = mi.UInt32(12 * s + 4 * r + c)
