@@ -148,6 +148,30 @@ def test_disk_and_cylinder_silhouettes_match_fd_and_mitsuba(name):
     assert _z(ad, ref) < Z_MAX, (ad, ref)
 
 
+def several_shapes(res=16):
+    """A black sphere ('obj', the one that moves), a cylinder and a disk before the
+    area light: curves of several shapes in one set."""
+    d = {"tube": {"type": "cylinder", "radius": 0.2, "bsdf": BLACK,
+                  "to_world": T().translate([-0.6, -0.3, 0.2]).rotate([1, 0.3, 0], 70).translate([0, 0, -0.5])},
+         "plate": {"type": "disk", "to_world": T().translate([-0.4, 0.5, 0.3]).rotate([1, 0, 0], 40).scale(0.3),
+                   "bsdf": BLACK}}
+    # the moving sphere after them (its curve is not the first of the set)
+    d.update(before_lamp({"type": "sphere", "radius": 0.35, "center": [0.45, 0.3, 0]}, res))
+    return d
+
+
+def test_several_analytic_shapes():
+    """Measured (16x16): FD -11.01 +- 0.54, pbr -10.98 +- 0.40 (6x128), Mitsuba rgb
+    -10.71 +- 0.34."""
+    res = 16
+    render, mover = _pbr(several_shapes(res))
+    fd = fd_batches(render, mover, res, 4, 2048)
+    ad = ad_batches(render, mover, res, 6, 128)
+    ref = _mitsuba(lambda: several_shapes(res), res, 4, 64)
+    print(f"several shapes: pbr {ad}, FD {fd}, Mitsuba rgb {ref}")
+    assert abs(fd[0]) > 5.0 and _z(ad, fd) < Z_MAX and _z(ad, ref) < Z_MAX, (ad, fd, ref)
+
+
 @pytest.mark.slow
 def test_sphere_shadow_matches_fd_mitsuba_and_needs_the_first_hit_term():
     """Measured (16x16): FD -2.42 +- 0.10 (4x2048), pbr -2.55 +- 0.16 (4x256), Mitsuba
