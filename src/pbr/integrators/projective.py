@@ -21,7 +21,8 @@ silhouette curves of analytic shapes:
 * **visibility at the first surface hit** (``sppi`` samples per pixel): from a camera
   path's first hit x, a point y on an edge, chosen by resampled importance sampling among
   24 candidates drawn by edge length (target: the edge measure below where the edge is a
-  silhouette seen from x, larger toward emitters); the jump is f(x, w) L_i(x, w) just beside the
+  silhouette seen from x, larger toward emitters and where the BSDF at x is large); the
+  jump is f(x, w) L_i(x, w) just beside the
   direction w = (y - x) / |y - x| on either side (L_i: the rest of the path, by the
   integrator's estimator with one segment fewer), the normal velocity is that of the
   direction, ((v_y - v_x) . n) / |y - x|, and the measure along the edge |e x w| / |y - x|.
@@ -89,6 +90,9 @@ LIGHT_BOOST = 16.0
 # target's weight of directions that do not point at an emitter (x10 in prb_projective,
 # whose jumps may come from indirect light).
 CANDIDATES = 24
+# The target also weighs a candidate by the first hit's BSDF toward it (f |cos|, mean over
+# the wavelengths) plus this floor, so that a glossy lobe's directions are preferred.
+BSDF_FLOOR = 0.01
 CONE_FLOOR = 0.02
 
 
@@ -534,16 +538,21 @@ class ProjectivePathIntegrator(PathIntegrator):
         # Resampled importance sampling (RIS) of the edge point: CANDIDATES points drawn by
         # edge length, one kept in proportion to target / pmf, the target being the edge
         # measure of a silhouette point times (floor + 1 if its direction points at an
-        # emitter's bounding sphere); estimate = h / target * mean(target / pmf).
+        # emitter's bounding sphere) times (BSDF_FLOOR + the BSDF toward it); estimate =
+        # h / target * mean(target / pmf).
         floor = CONE_FLOOR if self.max_depth == 2 else 10 * CONE_FLOOR
         wsum = mi.Float(0.0)
         k, t, target = mi.UInt32(0), mi.Float(0.0), mi.Float(0.0)
+        si_d = dr.detach(si)
+        ctx = ShadingContext(si_d, wl)
         for _ in range(CANDIDATES):
             k_i, pmf_i = self._distr.sample_pmf(rng.next_float32())
             t_i = rng.next_float32()
             y, e, sil, _ = edges.point(S, k_i, t_i, x, on)
             meas, wdir = _edge_measure(x, e, y)
             tgt = dr.select(on & sil, meas, 0.0) * (floor + self._toward_light(x, wdir))
+            f_i, _ = bsdfs.eval_pdf(bsdf_id, ctx, si_d.to_local(wdir), on & (tgt > 0))
+            tgt *= BSDF_FLOOR + dr.mean(f_i)
             w_i = dr.select(pmf_i > 0, tgt / pmf_i, 0.0)
             wsum += w_i
             take = rng.next_float32() * wsum < w_i
@@ -556,8 +565,6 @@ class ProjectivePathIntegrator(PathIntegrator):
         nw = cr / dr.norm(cr)
         meas, _ = _edge_measure(x, e, y)
         weight = dr.select(on, meas * wsum / (CANDIDATES * target), 0.0)
-        si_d = dr.detach(si)
-        ctx = ShadingContext(si_d, wl)
         g = []
         for sgn in (-1.0, 1.0):
             wo = dr.normalize(wdir + nw * (sgn * ANGLE_EPS))
