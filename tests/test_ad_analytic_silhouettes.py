@@ -174,7 +174,7 @@ def test_several_analytic_shapes():
 
 @pytest.mark.slow
 def test_sphere_shadow_matches_fd_mitsuba_and_needs_the_first_hit_term():
-    """Measured (16x16): FD -2.42 +- 0.10 (4x2048), pbr -2.52 +- 0.19 (4x256), Mitsuba
+    """Measured (16x16): FD -2.42 +- 0.10 (4x2048), pbr -2.51 +- 0.19 (4x256), Mitsuba
     direct_projective rgb -2.29 +- 0.04 (4x256); without the first-hit term (sppi = 0)
     -0.78 +- 0.03."""
     res = 16
@@ -324,7 +324,7 @@ def sphere_in_a_glossy_floor(res=16, sppi=None):
 @pytest.mark.slow
 def test_sphere_in_a_glossy_reflection():
     """Indirect visibility: the sphere's silhouette seen from the floor (prb_projective's
-    first-hit term). Measured (16x16): FD -14.81 +- 0.38 (8x4096), pbr -15.16 +- 0.13
+    first-hit term). Measured (16x16): FD -14.81 +- 0.38 (8x4096), pbr -15.31 +- 0.11
     (8x1024; -15.02 +- 0.39 before the first-hit candidates were weighted by the BSDF),
     Mitsuba prb_projective rgb -15.19 +- 0.26 (4x256); without the first-hit term
     (sppi = 0) -8.56 +- 0.36."""
@@ -416,8 +416,8 @@ def test_first_hit_candidates_follow_a_glossy_lobe():
     """The first-hit term alone on the sphere above the rough metal floor: its candidate
     points are weighted by the floor's BSDF toward them, so few are wasted outside the
     glossy lobe. Measured (8x256): per-batch standard deviation 0.39 (2.9 without the
-    BSDF in the target: must-fail checked); mean -6.35 +- 0.14 (unweighted -5.96 +-
-    1.03)."""
+    BSDF in the target, measured before the rays were aimed from the spawned origin:
+    must-fail checked then); mean -6.46 +- 0.14."""
     res = 16
     d = sphere_in_a_glossy_floor(res)
     d["integrator"].update({"sppc": 0, "sppp": 0})

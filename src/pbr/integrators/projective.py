@@ -567,10 +567,14 @@ class ProjectivePathIntegrator(PathIntegrator):
         weight = dr.select(on, meas * wsum / (CANDIDATES * target), 0.0)
         g = []
         for sgn in (-1.0, 1.0):
-            wo = dr.normalize(wdir + nw * (sgn * ANGLE_EPS))
-            f, _ = bsdfs.eval_pdf(bsdf_id, ctx, si_d.to_local(wo), on)
+            # aimed beside the edge point from the spawned ray's origin, which lies off x
+            # (along the normal, by about as much as the offset beside the edge: aiming
+            # from x put both rays on one side of edges seen at a low angle)
+            ray = si_d.spawn_ray(wdir)
+            ray.d = dr.normalize(y + nw * (sgn * ANGLE_EPS * r) - ray.o)
+            f, _ = bsdfs.eval_pdf(bsdf_id, ctx, si_d.to_local(ray.d), on)
             r2 = rng.copy()
-            Li = self._incident(scene, r2, si_d.spawn_ray(wo), wl, on)
+            Li = self._incident(scene, r2, ray, wl, on)
             g.append(f * Li)
         jump = dr.select(on, (g[0] - g[1]) * weight, 0.0)
         with dr.resume_grad():
