@@ -31,7 +31,7 @@ KEY = "box.vertex_positions"
 TRUE = np.array([0.15, 0.0, -0.1, 0.35])      # x, y (up), z translation; yaw (radians)
 INIT = np.array([-0.2, 0.1, 0.2, 0.0])
 FULL = dict(res=48, views=2, spp=16, ref_spp=512, n_iter=60, lr=0.04, lr_final=0.1)
-SMALL = dict(res=24, views=1, spp=8, ref_spp=128, n_iter=12, lr=0.06, lr_final=0.3)
+SMALL = dict(res=24, views=1, spp=32, ref_spp=128, n_iter=12, lr=0.06, lr_final=0.3)
 VIEWS = [(0.0, 2.0, 3.5), (3.0, 2.2, 1.5)]
 
 

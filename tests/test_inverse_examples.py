@@ -5,7 +5,7 @@ of reach of a broken gradient (each is well below the initial error).
 Bounds and loss factors were set from measured runs of the small configurations
 (docs/inverse.md lists them): albedo texture RMSE 0.218 -> 0.040, roughness/IOR max
 error 0.20 -> 0.022, envmap upper-hemisphere RMSE 0.73 -> 0.35, volume density RMSE
-0.18 -> 0.10, box pose max error 0.47 -> 0.14, shape Chamfer distance 0.098 -> 0.043. The image losses are Monte Carlo estimates with a noise floor, so the loss
+0.18 -> 0.10, box pose max error 0.47 -> 0.15, shape Chamfer distance 0.098 -> 0.043. The image losses are Monte Carlo estimates with a noise floor, so the loss
 test compares the mean of the first two iterations with the mean of the last two.
 """
 
@@ -67,7 +67,8 @@ def test_volume_small():
 
 
 def test_pose_small():
-    """Geometry (direct_projective): box pose, max error 0.47 -> 0.14 measured."""
+    """Geometry (direct_projective): box pose, max error 0.47 -> 0.15 measured (32 spp;
+    at 8 spp the end error ranged over 0.07 to 0.26 with the random numbers)."""
     check(optimize_pose.main(small=True, log=False), bound=0.25, factor=1.2)
 
 

@@ -9,17 +9,20 @@ integral along the moving boundary of (the jump of the integrand) x (the boundar
 normal velocity) (Li et al. 2018, "Differentiable Monte Carlo Ray Tracing through Edge
 Sampling"; Zhang et al. 2023, "Projective Sampling for Differentiable Rendering of
 Geometry", whose integrators these follow in name and parameters). pbr estimates two such
-boundaries by sampling points on silhouette edges of triangle meshes:
+boundaries by sampling points on silhouette edges of triangle meshes and on the
+silhouette curves of analytic shapes:
 
 * **primary visibility** (``sppp`` samples per pixel): the edges that are silhouettes
   from the pinhole, projected onto the film; an edge is chosen in proportion to its
-  projected length and a point uniformly on it. The jump is the radiance just beside the
+  projected length inside the film (plus ``OFF_FILM`` of the rest) and a point uniformly
+  on it. The jump is the radiance just beside the
   projected edge on either side (two camera rays, the integrator's own estimator with the
   same random numbers), weighted by the pixel filter of each pixel the point falls on.
 * **visibility at the first surface hit** (``sppi`` samples per pixel): from a camera
   path's first hit x, a point y on an edge, chosen by resampled importance sampling among
   24 candidates drawn by edge length (target: the edge measure below where the edge is a
-  silhouette seen from x, larger toward emitters); the jump is f(x, w) L_i(x, w) just beside the
+  silhouette seen from x, larger toward emitters and where the BSDF at x is large); the
+  jump is f(x, w) L_i(x, w) just beside the
   direction w = (y - x) / |y - x| on either side (L_i: the rest of the path, by the
   integrator's estimator with one segment fewer), the normal velocity is that of the
   direction, ((v_y - v_x) . n) / |y - x|, and the measure along the edge |e x w| / |y - x|.
@@ -34,12 +37,15 @@ edges between coplanar faces are never silhouettes and are dropped. An edge is a
 silhouette seen from a point p when its two faces' third vertices lie on the same side of
 the plane through p and the edge; boundary edges (one face) always are. The welded
 positions are the mean of the split copies (attached), so a vertex's gradient is shared
-among its copies.
+among its copies. Analytic shapes (``sphere``, ``disk``, ``cylinder``; ``silhouettes.py``)
+add curves after the edges, whose points depend on the viewpoint (a sphere's circle of
+tangency, a cylinder's grazing side lines) or not (rims); each is a boundary ``k`` with
+a parameter t in [0, 1), like an edge, so both terms choose among edges and curves alike.
 
 Interior derivatives are ``prb``'s, with light samples in solid angle (the direction
 toward an area light is fixed when the shading point moves), which is the measure the
 first-hit boundary term is written in. Not handled (documented in docs/inverse.md):
-boundaries of analytic shapes other than rectangles (sphere, disk, cylinder: use a mesh),
+boundaries of curves (``linearcurve``, ``bsplinecurve``) and SDF grids (a warning says so),
 discontinuities after the first bounce, hard shadows of point and spot lights (their
 boundary lies on the receiver, not in a direction), non-pinhole cameras, and guiding
 (``guiding`` and its options are accepted and ignored).
@@ -67,10 +73,13 @@ from ..spectrum import SampledWavelengths
 from .base import (BACKWARD, FORWARD, INTEGRATORS, PRIMAL, forward_derivative,
                    max_samples_per_pass)
 from .path import PathIntegrator
+from .silhouettes import CurveSet, curve_kinds
 
 # Offset beside an edge at which the two sides' radiance is estimated: a fraction of a
 # pixel (primary visibility) and an angle (radians) at the first hit.
 PIXEL_EPS = 1e-3
+# Primary term: weight of a boundary's length outside the film in its probability.
+OFF_FILM = 0.01
 ANGLE_EPS = 1e-4
 # Two faces are coplanar (their edge is never a silhouette) below this |sin| of the angle
 # between the fourth vertex and the first face's plane.
@@ -81,6 +90,9 @@ LIGHT_BOOST = 16.0
 # target's weight of directions that do not point at an emitter (x10 in prb_projective,
 # whose jumps may come from indirect light).
 CANDIDATES = 24
+# The target also weighs a candidate by the first hit's BSDF toward it (f |cos|, mean over
+# the wavelengths) plus this floor, so that a glossy lobe's directions are preferred.
+BSDF_FLOOR = 0.01
 CONE_FLOOR = 0.02
 
 
@@ -126,9 +138,10 @@ def _mesh_edges(faces: np.ndarray, pos: np.ndarray):
 
 
 class EdgeSet:
-    """The candidate silhouette edges of a scene (see the module docstring): topology built
-    once per geometry, positions gathered (attached) from the shapes' current vertex
-    buffers by :meth:`positions`."""
+    """The candidate boundaries of a scene (see the module docstring): mesh edges, then
+    the analytic shapes' curves (:class:`CurveSet`). Topology built once per geometry;
+    positions and frames gathered (attached) from the shapes' current parameters by
+    :meth:`state`."""
 
     def __init__(self, scene):
         geo = scene.geometry
@@ -137,6 +150,7 @@ class EdgeSet:
         n_vert = 0
         counts = []
         emitting = []    # welded vertex ranges of emissive shapes (see edge_weights)
+        analytic = []    # spheres, disks, cylinders (silhouettes.CurveSet)
         for i in scene.top_level_shapes():
             shape = geo.mi_shape(i)
             first = n_vert
@@ -164,12 +178,16 @@ class EdgeSet:
                     c.append(np.array([n_vert + (k + 2) % 4])); d.append(np.array([-1]))
                 counts.append(np.ones(4))
                 n_vert += 4
+            elif curve_kinds(shape):
+                analytic.append(shape)
             if scene.shape_emitter[i] and n_vert > first:
                 emitting.append((first, n_vert))
         self.n_vertices = n_vert
         self.emitting = emitting
-        self.count = len(np.concatenate(a)) if a else 0
-        if not self.count:
+        self.curves = CurveSet(analytic)
+        self.n_edges = len(np.concatenate(a)) if a else 0
+        self.count = self.n_edges + self.curves.count     # edges, then analytic curves
+        if not self.n_edges:
             return
         a, b, c, d = (np.concatenate(x) for x in (a, b, c, d))
         self.a, self.b, self.c = (mi.UInt32(x.astype(np.uint32)) for x in (a, b, c))
@@ -192,18 +210,55 @@ class EdgeSet:
         return acc * self.inv_count
 
     def gather(self, P, k, active):
-        """(a, b, c, d, has_d) of edges ``k`` from welded positions ``P``."""
+        """(a, b, c, d, has_d) of edges ``k`` (< ``n_edges``) from welded positions ``P``."""
         g = lambda idx: dr.gather(mi.Point3f, P, dr.gather(mi.UInt32, idx, k, active), active)  # noqa: E731
         return g(self.a), g(self.b), g(self.c), g(self.d), dr.gather(mi.Bool, self.has_d, k, active)
 
+    def state(self):
+        """The geometry the boundary points are made of, attached to the shapes'
+        parameters: (welded vertex positions, the analytic shapes' frames)."""
+        P = self.positions() if self.n_edges else None
+        return P, (self.curves.frames() if self.curves.count else None)
 
-def _edge_measure(x, a, b, y):
-    """(|e x w| |e| / |y - x|: the solid-angle length swept per unit of the edge
-    parameter at edge point y seen from x, the unit direction w from x to y)."""
+    def point(self, S, k, t, view, active):
+        """Boundary ``k`` (an edge, or past ``n_edges`` an analytic curve) at parameter
+        ``t`` in [0, 1) seen from ``view``, with geometry ``S`` (:meth:`state`): (the
+        point y, dy/dt, whether it is a silhouette from ``view``, a handle for
+        :meth:`attached`)."""
+        P, F = S
+        y, e, sil = mi.Point3f(0.0), mi.Vector3f(0.0), mi.Bool(False)
+        on_edge = active & (k < self.n_edges)
+        if self.n_edges:
+            a, b, c, d, has_d = self.gather(P, k, on_edge)
+            y, e = dr.fma(b - a, t, a), b - a
+            sil = on_edge & silhouette(view, a, b, c, d, has_d)
+        y_l = mi.Vector3f(0.0)
+        if self.curves.count:
+            on_curve = active & (k >= self.n_edges)
+            yc, ec, ok, y_l = self.curves.point(F, k - self.n_edges, t, view, on_curve)
+            y, e, sil = dr.select(on_curve, yc, y), dr.select(on_curve, ec, e), dr.select(on_curve, ok, sil)
+        return y, e, sil, y_l
+
+    def attached(self, S, k, t, y_l, active):
+        """The point of :meth:`point` moving with the shapes (``S`` attached)."""
+        P, F = S
+        y = mi.Point3f(0.0)
+        on_edge = active & (k < self.n_edges)
+        if self.n_edges:
+            a, b, _, _, _ = self.gather(P, k, on_edge)
+            y = dr.fma(b - a, t, a)
+        if self.curves.count:
+            on_curve = active & (k >= self.n_edges)
+            y = dr.select(on_curve, self.curves.attached(F, k - self.n_edges, y_l, on_curve), y)
+        return y
+
+
+def _edge_measure(x, e, y):
+    """(|e x w| / |y - x|: the solid-angle length swept per unit of the boundary's
+    parameter at its point y seen from x, e = dy/dt; the unit direction w from x to y)."""
     v = y - x
     r = dr.norm(v)
     w = v / r
-    e = b - a
     meas = dr.norm(dr.cross(w, e)) / r
     return dr.select(r > 0, meas, 0.0), w
 
@@ -220,8 +275,8 @@ class ProjectivePathIntegrator(PathIntegrator):
     """``prb_projective`` (Mitsuba's name and parameters): ``prb``'s path tracer whose
     derivatives w.r.t. geometry (mesh vertices, shape ``to_world``) include the boundary
     terms of primary visibility and of visibility at the first surface hit, estimated by
-    sampling silhouette edges (see docs/inverse.md, "Geometry"). Primal images are
-    ``prb``'s.
+    sampling silhouette edges of meshes and silhouette curves of spheres, disks and
+    cylinders (see docs/inverse.md, "Geometry"). Primal images are ``prb``'s.
 
     =============  ======  =======  ==============================================================
     name           type    default  meaning
@@ -279,14 +334,17 @@ class ProjectivePathIntegrator(PathIntegrator):
 
     def _warn_uncovered(self, scene) -> None:
         """Warn (once per shape) about shapes with gradients whose silhouettes pbr does
-        not sample (analytic shapes: their boundary terms are missing)."""
+        not sample (shapes other than meshes, rectangles, spheres, disks and cylinders:
+        their boundary terms are missing)."""
         warned = self.__dict__.setdefault("_warned", set())
         for shape in scene.mi_scene.shapes():
-            if shape.parameters_grad_enabled() and not shape.is_mesh() and shape.id() not in warned:
+            covered = (shape.is_mesh() or curve_kinds(shape) is not None
+                       or shape.shape_type() == int(mi.ShapeType.Rectangle))
+            if shape.parameters_grad_enabled() and not covered and shape.id() not in warned:
                 warned.add(shape.id())
-                warnings.warn(f"{self.name}: shape {shape.id()!r} is not a triangle mesh; its silhouettes are not "
-                              f"sampled, so the boundary part of its derivative is missing (use a mesh, e.g. an "
-                              f"'obj' or 'ply' sphere)", RuntimeWarning, stacklevel=4)
+                warnings.warn(f"{self.name}: the silhouettes of shape {shape.id()!r} are not sampled (pbr samples "
+                              f"those of meshes, rectangles, spheres, disks and cylinders), so the boundary part "
+                              f"of its derivative is missing", RuntimeWarning, stacklevel=4)
 
     def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0, sample=None):
         self._warn_uncovered(scene)
@@ -301,7 +359,7 @@ class ProjectivePathIntegrator(PathIntegrator):
         if n_p:
             self._primary(scene, sensor, seed, n_p, BACKWARD, g)
         if n_i:
-            self._distr = self._edge_distribution(scene, dr.detach(self.edges.positions()))
+            self._distr = self._edge_distribution(scene, _detached(self.edges.state()))
             super().render_backward(scene, grad_img, sensor, _mix(seed, 2), n_i, sample=self._first_hit_boundary)
 
     def render_forward(self, scene, sensor=0, seed=0, spp=0, sample=None):
@@ -318,7 +376,7 @@ class ProjectivePathIntegrator(PathIntegrator):
         if n_p:
             img = img + self._primary(scene, sensor, seed, n_p, FORWARD, None)
         if n_i:
-            self._distr = self._edge_distribution(scene, dr.detach(self.edges.positions()))
+            self._distr = self._edge_distribution(scene, _detached(self.edges.state()))
             img = img + super().render_forward(scene, sensor, _mix(seed, 2), n_i, sample=self._first_hit_boundary)
         return img
 
@@ -346,14 +404,8 @@ class ProjectivePathIntegrator(PathIntegrator):
         proj = _Projection(cam, w, h)
         edges = self.edges
         with dr.suspend_grad():
-            P = dr.detach(edges.positions())
-            k_all = dr.arange(mi.UInt32, edges.count)
-            a, b, c, d, has_d = edges.gather(P, k_all, True)
-            sil = silhouette(proj.o, a, b, c, d, has_d)
-            za, zb = proj.depth(a), proj.depth(b)
-            front = (za > cam.near_clip) & (zb > cam.near_clip)
-            length = dr.norm(proj.pixel(a) - proj.pixel(b))
-            pmf_w = dr.select(sil & front & dr.isfinite(length), length, 0.0)
+            S = _detached(edges.state())
+            pmf_w = self._projected_lengths(cam, proj, edges, S)
             total = float(dr.sum(pmf_w)[0])
         if not total > 0.0:
             return None if mode == BACKWARD else dr.zeros(mi.TensorXf, (h, w, 3))
@@ -363,7 +415,7 @@ class ProjectivePathIntegrator(PathIntegrator):
         per_pass = max(1, min(n, max_samples_per_pass()))
         acc = dr.zeros(mi.Float, w * h * 3) if mode == FORWARD else None
         for first in range(0, n, per_pass):      # passes of bounded memory
-            acc = self._primary_pass(scene, cam, proj, edges, P, distr, fx, fy, n, first, min(per_pass, n - first),
+            acc = self._primary_pass(scene, cam, proj, edges, S, distr, fx, fy, n, first, min(per_pass, n - first),
                                      seed, mode, g, acc)
             dr.eval(acc) if acc is not None else dr.eval()
         if mode == BACKWARD:
@@ -376,7 +428,36 @@ class ProjectivePathIntegrator(PathIntegrator):
                 dr.scatter(out, rgb[ch], pixel * 3 + ch)
             return mi.TensorXf(out, (h, w, 3))
 
-    def _primary_pass(self, scene, cam, proj, edges, P, distr, fx, fy, n, first, count, seed, mode, g, acc):
+    @staticmethod
+    def _projected_lengths(cam, proj, edges, S, n_seg=32):
+        """Per boundary, its length on the film where it is a silhouette from the pinhole
+        in front of the camera (0 elsewhere): the primary term's choice of boundary.
+        Analytic curves are measured as polylines of ``n_seg`` segments. Only the part
+        inside the film counts (plus ``OFF_FILM`` of the rest: a curve may leave its
+        polyline), so that edges reaching far outside it (a floor's) do not take the
+        samples of the shapes in view."""
+        w, h = cam.film.size
+        parts = []
+        for first, count, n in ((0, edges.n_edges, 1), (edges.n_edges, edges.curves.count, n_seg)):
+            if not count:
+                continue
+            k = dr.repeat(dr.arange(mi.UInt32, count), n + 1) + first
+            j = dr.tile(dr.arange(mi.UInt32, n + 1), count)
+            y, _, sil, _ = edges.point(S, k, mi.Float(j) / n, proj.o, True)
+            front = sil & (proj.depth(y) > cam.near_clip)
+            x = proj.pixel(y)
+            seg = dr.arange(mi.UInt32, count * n)
+            i0 = seg // n * (n + 1) + seg % n
+            x0, x1 = dr.gather(mi.Point2f, x, i0), dr.gather(mi.Point2f, x, i0 + 1)
+            full = dr.norm(x1 - x0)
+            d = _clipped_fraction(x0, x1, w, h) * full + OFF_FILM * full
+            ok = dr.gather(mi.Bool, front, i0) & dr.gather(mi.Bool, front, i0 + 1) & dr.isfinite(d)
+            out = dr.zeros(mi.Float, count)
+            dr.scatter_reduce(dr.ReduceOp.Add, out, dr.select(ok, d, 0.0), seg // n)
+            parts.append(np.array(out, np.float32))
+        return mi.Float(np.concatenate(parts))
+
+    def _primary_pass(self, scene, cam, proj, edges, S, distr, fx, fy, n, first, count, seed, mode, g, acc):
         """Samples ``first`` .. ``first + count`` of the ``n`` of the primary term."""
         w, h = cam.film.size
         rf = cam.film.rfilter
@@ -386,13 +467,13 @@ class ProjectivePathIntegrator(PathIntegrator):
             wl = SampledWavelengths.sample_visible(rng.next_float32())
             k, pmf = distr.sample_pmf(rng.next_float32())
             t = rng.next_float32()
-            a, b, c, d, has_d = edges.gather(P, k, True)
-            y = dr.fma(b - a, t, a)
-            x, dx = proj.pixel(y), proj.pixel_dt(a, b - a, t)
+            y, e, sil, y_l = edges.point(S, k, t, proj.o, True)
+            x, dx = proj.pixel(y), proj.pixel_dt(y, e, 0.0)
             speed = dr.norm(dx)
             nrm = mi.Vector2f(-dx.y, dx.x) / speed
             # the image integrates over the film only (samples outside it are dropped)
-            ok = (pmf > 0) & (speed > 0) & (x.x >= 0) & (x.x < w) & (x.y >= 0) & (x.y < h)
+            ok = (pmf > 0) & sil & (proj.depth(y) > cam.near_clip) & (speed > 0)
+            ok &= (x.x >= 0) & (x.x < w) & (x.y >= 0) & (x.y < h)
             weight = dr.select(ok, speed / (pmf * n), 0.0)
             L = []
             self.face_first_hit = True       # past the rim of interpolated normals (face_the_ray)
@@ -419,10 +500,9 @@ class ProjectivePathIntegrator(PathIntegrator):
                     inside &= fw != 0
                     taps.append((mi.UInt32(py * w + px), fw, inside))
         with dr.resume_grad():
-            Pa = edges.positions()
-            aa, ba, _, _, _ = edges.gather(Pa, k, ok)
+            y_a = edges.attached(edges.state(), k, t, y_l, ok)
             proj_ad = _Projection(cam, w, h, attached=True) if cam.to_world_ad is not None else proj
-            vn = dr.dot(proj_ad.pixel(dr.fma(ba - aa, t, aa)), dr.detach(nrm))
+            vn = dr.dot(proj_ad.pixel(y_a), dr.detach(nrm))
         if mode == BACKWARD:
             with dr.suspend_grad():
                 g_xyz = mi.Array3f(0.0)
@@ -453,49 +533,53 @@ class ProjectivePathIntegrator(PathIntegrator):
         hit = active & si.is_valid()
         bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
         on = hit & bsdfs.smooth(bsdf_id, hit) & (self.max_depth < 0 or self.max_depth > 1)
-        P = dr.detach(edges.positions())
+        S = _detached(edges.state())
         x = dr.detach(si.p)
         # Resampled importance sampling (RIS) of the edge point: CANDIDATES points drawn by
         # edge length, one kept in proportion to target / pmf, the target being the edge
         # measure of a silhouette point times (floor + 1 if its direction points at an
-        # emitter's bounding sphere); estimate = h / target * mean(target / pmf).
+        # emitter's bounding sphere) times (BSDF_FLOOR + the BSDF toward it); estimate =
+        # h / target * mean(target / pmf).
         floor = CONE_FLOOR if self.max_depth == 2 else 10 * CONE_FLOOR
         wsum = mi.Float(0.0)
         k, t, target = mi.UInt32(0), mi.Float(0.0), mi.Float(0.0)
+        si_d = dr.detach(si)
+        ctx = ShadingContext(si_d, wl)
         for _ in range(CANDIDATES):
             k_i, pmf_i = self._distr.sample_pmf(rng.next_float32())
             t_i = rng.next_float32()
-            a, b, c, d, has_d = edges.gather(P, k_i, on)
-            y = dr.fma(b - a, t_i, a)
-            meas, wdir = _edge_measure(x, a, b, y)
-            tgt = dr.select(on & silhouette(x, a, b, c, d, has_d), meas, 0.0) * (floor + self._toward_light(x, wdir))
+            y, e, sil, _ = edges.point(S, k_i, t_i, x, on)
+            meas, wdir = _edge_measure(x, e, y)
+            tgt = dr.select(on & sil, meas, 0.0) * (floor + self._toward_light(x, wdir))
+            f_i, _ = bsdfs.eval_pdf(bsdf_id, ctx, si_d.to_local(wdir), on & (tgt > 0))
+            tgt *= BSDF_FLOOR + dr.mean(f_i)
             w_i = dr.select(pmf_i > 0, tgt / pmf_i, 0.0)
             wsum += w_i
             take = rng.next_float32() * wsum < w_i
             k, t, target = dr.select(take, k_i, k), dr.select(take, t_i, t), dr.select(take, tgt, target)
         on &= target > 0
-        a, b, c, d, has_d = edges.gather(P, k, on)
-        y = dr.fma(b - a, t, a)
+        y, e, _, y_l = edges.point(S, k, t, x, on)
         r = dr.norm(y - x)
         wdir = (y - x) / r
-        cr = dr.cross(wdir, dr.normalize(b - a))
+        cr = dr.cross(wdir, dr.normalize(e))
         nw = cr / dr.norm(cr)
-        meas, _ = _edge_measure(x, a, b, y)
+        meas, _ = _edge_measure(x, e, y)
         weight = dr.select(on, meas * wsum / (CANDIDATES * target), 0.0)
-        si_d = dr.detach(si)
-        ctx = ShadingContext(si_d, wl)
         g = []
         for sgn in (-1.0, 1.0):
-            wo = dr.normalize(wdir + nw * (sgn * ANGLE_EPS))
-            f, _ = bsdfs.eval_pdf(bsdf_id, ctx, si_d.to_local(wo), on)
+            # aimed beside the edge point from the spawned ray's origin, which lies off x
+            # (along the normal, by about as much as the offset beside the edge: aiming
+            # from x put both rays on one side of edges seen at a low angle)
+            ray = si_d.spawn_ray(wdir)
+            ray.d = dr.normalize(y + nw * (sgn * ANGLE_EPS * r) - ray.o)
+            f, _ = bsdfs.eval_pdf(bsdf_id, ctx, si_d.to_local(ray.d), on)
             r2 = rng.copy()
-            Li = self._incident(scene, r2, si_d.spawn_ray(wo), wl, on)
+            Li = self._incident(scene, r2, ray, wl, on)
             g.append(f * Li)
         jump = dr.select(on, (g[0] - g[1]) * weight, 0.0)
         with dr.resume_grad():
-            Pa = edges.positions()
-            aa, ba, _, _, _ = edges.gather(Pa, k, on)
-            vn = dr.dot(dr.fma(ba - aa, t, aa) - si.p, dr.detach(nw)) / dr.detach(r)
+            y_a = edges.attached(edges.state(), k, t, y_l, on)
+            vn = dr.dot(y_a - si.p, dr.detach(nw)) / dr.detach(r)
             term = jump * vn
             if mode == BACKWARD:
                 dr.backward_from(dL * term, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
@@ -515,35 +599,42 @@ class ProjectivePathIntegrator(PathIntegrator):
             out |= (dist2 <= rad * rad) | (dr.dot(v, wdir) >= cos_max * dr.sqrt(dist2))
         return dr.select(out, 1.0, 0.0)
 
-    def _edge_distribution(self, scene, P):
-        """Edges for the first-hit term: in proportion to length, times ``LIGHT_BOOST`` for
-        the edges that are silhouettes seen from a vertex or the centroid of an emissive
-        shape (those that cast shadow boundaries of small lights). Every edge keeps a
-        nonzero probability, so the estimator stays unbiased; this is a cheap stand-in
-        for Mitsuba's guiding structures."""
+    def _edge_distribution(self, scene, S):
+        """Boundaries for the first-hit term: in proportion to length, times
+        ``LIGHT_BOOST`` for the edges that are silhouettes seen from a vertex or the
+        centroid of an emissive shape (those that cast shadow boundaries of small lights)
+        and for the analytic curves (silhouettes from almost everywhere). Every boundary
+        keeps a nonzero probability, so the estimator stays unbiased; this is a cheap
+        stand-in for Mitsuba's guiding structures."""
         edges = self.edges
+        P, F = S
         with dr.suspend_grad():
-            k_all = dr.arange(mi.UInt32, edges.count)
-            a, b, c, d, has_d = edges.gather(P, k_all, True)
-            weight = dr.norm(b - a)
-            pts = np.array(P, dtype=np.float64).reshape(-1, 3)
             self._spheres = []
-            for lo, hi in edges.emitting:
-                q = pts[lo:hi]
-                centre = q.mean(axis=0)
-                self._spheres.append((*centre.tolist(), float(np.linalg.norm(q - centre, axis=1).max()) * 1.001))
             # emitters the edge table does not hold (environment, other shapes' lights):
             # every direction may see light
             held = len(self._scene_emissive_shapes(scene)) == len(edges.emitting)
             self._all_directions = bool(scene.lights.has_infinite) or not held or not edges.emitting
-            if edges.emitting:
-                lights = [pts[lo:hi] for lo, hi in edges.emitting]
-                lights = np.concatenate(lights + [np.mean(x, axis=0, keepdims=True) for x in lights])
-                mark = mi.Bool(False)
-                for q in lights.tolist():
-                    mark |= silhouette(mi.Point3f(*q), a, b, c, d, has_d)
-                weight = weight * dr.select(mark, LIGHT_BOOST, 1.0)
-            return mi.DiscreteDistribution(weight)
+            weights = []
+            if edges.n_edges:
+                k_all = dr.arange(mi.UInt32, edges.n_edges)
+                a, b, c, d, has_d = edges.gather(P, k_all, True)
+                weight = dr.norm(b - a)
+                pts = np.array(P, dtype=np.float64).reshape(-1, 3)
+                for lo, hi in edges.emitting:
+                    q = pts[lo:hi]
+                    centre = q.mean(axis=0)
+                    self._spheres.append((*centre.tolist(), float(np.linalg.norm(q - centre, axis=1).max()) * 1.001))
+                if edges.emitting:
+                    lights = [pts[lo:hi] for lo, hi in edges.emitting]
+                    lights = np.concatenate(lights + [np.mean(x, axis=0, keepdims=True) for x in lights])
+                    mark = mi.Bool(False)
+                    for q in lights.tolist():
+                        mark |= silhouette(mi.Point3f(*q), a, b, c, d, has_d)
+                    weight = weight * dr.select(mark, LIGHT_BOOST, 1.0)
+                weights.append(np.array(weight, np.float64))
+            if edges.curves.count:
+                weights.append(LIGHT_BOOST * edges.curves.lengths(F))
+            return mi.DiscreteDistribution(mi.Float(np.concatenate(weights).astype(np.float32)))
 
     def _incident(self, scene, rng, ray, wl, active):
         """Radiance arriving along ``ray`` (the rest of a path: one segment fewer than
@@ -643,6 +734,25 @@ class _Projection:
         X, Y = dr.fma(D.x, t, A.x), dr.fma(D.y, t, A.y)
         inv2 = dr.rcp(z * z)
         return mi.Vector2f(self.kx * (D.x * z - X * D.z) * inv2, self.ky * (D.y * z - Y * D.z) * inv2)
+
+
+def _clipped_fraction(x0, x1, w, h):
+    """The fraction of film segment x0 -> x1 inside [0, w] x [0, h] (Liang-Barsky)."""
+    d = x1 - x0
+    t0, t1 = mi.Float(0.0), mi.Float(1.0)
+    out = mi.Bool(False)
+    for p, q in ((-d.x, x0.x), (d.x, w - x0.x), (-d.y, x0.y), (d.y, h - x0.y)):
+        r = q / p       # the segment is inside where p t <= q
+        t0 = dr.select(p < 0, dr.maximum(t0, r), t0)
+        t1 = dr.select(p > 0, dr.minimum(t1, r), t1)
+        out |= (p == 0) & (q < 0)
+    return dr.select(out | (t1 <= t0), 0.0, t1 - t0)
+
+
+def _detached(S):
+    """:meth:`EdgeSet.state` without its gradients."""
+    P, F = S
+    return (None if P is None else dr.detach(P)), (None if F is None else tuple(dr.detach(f) for f in F))
 
 
 def _filter_norms(rf, n: int) -> mi.Float:
