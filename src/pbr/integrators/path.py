@@ -102,16 +102,26 @@ class PathIntegrator(SamplingIntegrator):
 
         ray, active, L, beta, depth, valid = path_state(ray, active, None if primal else L_in)
         prev_p, prev_n, prev_pdf, prev_delta = mis_state(ray)
-        dL_fwd = mi.Spectrum(0.0)
-        eta = mi.Float(1.0)
-        terminated = mi.Bool(False)
+        # The loop state holds only what a bounce changes: Dr.Jit traces the body a second
+        # time to drop state variables that come back unchanged (a render's largest fixed
+        # cost). So the ray's time and wavelengths, the sample stream's constants and the
+        # wavelengths stay outside it, and the forward derivative, the relative IOR and the
+        # dispersion flag are state only where they can change.
+        dL_fwd = None if primal or mode == BACKWARD else mi.Spectrum(0.0)
+        eta = mi.Float(1.0) if bsdfs.refracts else None
         dispersive = bsdfs.dispersive
+        terminated = mi.Bool(False) if dispersive else None
         seen = mi.Bool(False)     # a surface whose sampled lobe is not null (hide_emitters)
+        ray_o, ray_d, ray_maxt = ray.o, ray.d, ray.maxt
+        ray_time, ray_wavelengths = ray.time, ray.wavelengths
+        rng_state = rng.loop_state()
 
         # The camera rays attached to a differentiated camera pose (replays only).
         ray_ad = None if primal else self.primary_ray_ad
 
-        while dr.hint(active, label="path"):
+        while dr.hint(active, label="path", exclude=[ray, rng, wl, ray_time, ray_wavelengths]):
+            ray = mi.Ray3f(ray_o, ray_d, ray_maxt, ray_time, ray_wavelengths)
+            rng.set_loop_state(rng_state)
             # Replays differentiate the hit w.r.t. the geometry (it moves along the ray).
             r_ad = None
             if ray_ad is not None:
@@ -209,23 +219,27 @@ class PathIntegrator(SamplingIntegrator):
                         dL_fwd += forward_derivative(Lo)
 
             beta[~skip] = beta * bs.weight
-            eta[~skip] = eta * bs.eta
+            if eta is not None:
+                eta[~skip] = eta * bs.eta
             prev_p = mi.Point3f(dr.detach(si.p))
             prev_n = mi.Normal3f(dr.detach(si.n))
             prev_pdf = mi.Float(bs.pdf)
             prev_delta = skip | bs.delta
             ray = dr.select(skip, si.spawn_ray(ray.d), si.spawn_ray(si.to_world(bs.wo)))
+            ray_o, ray_d, ray_maxt = ray.o, ray.d, ray.maxt
             depth[hit & ~skip] = depth + 1
 
             # Russian roulette (the survival probability is detached, as in Mitsuba).
             b_max = dr.max(beta)
-            q = dr.minimum(b_max * eta * eta, 0.95)
+            q = dr.minimum(b_max * eta * eta if eta is not None else b_max, 0.95)
             rr = (depth >= self.rr_depth) & ~skip
             survive = rng.next_float32() < q
             beta[rr] = beta * dr.rcp(dr.detach(q))
             active = skip | (cont & (~rr | survive) & (b_max > 0))
+            rng_state = rng.loop_state()
 
-        return (L if primal else dL_fwd), valid
+        rng.set_loop_state(rng_state)
+        return (L if primal else mi.Spectrum(0.0) if dL_fwd is None else dL_fwd), valid
 
 
 @INTEGRATORS.register("prb_basic")

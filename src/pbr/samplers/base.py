@@ -96,6 +96,18 @@ class SampleStream(Struct):
         """The position inside the pixel (the filter's sample): the sampler's best 2D pair."""
         return self.next_2d()
 
+    def loop_state(self) -> tuple:
+        """The arrays a draw changes: what a symbolic loop that draws from this stream
+        carries (the stream itself stays outside the loop state, so constant arrays do
+        not make Dr.Jit trace the loop body twice). Default: every field."""
+        return tuple(getattr(self, k) for k in type(self).DRJIT_STRUCT)
+
+    def set_loop_state(self, state: tuple) -> None:
+        """Set the arrays :meth:`loop_state` returned (at the start of a loop iteration,
+        and after the loop)."""
+        for k, v in zip(type(self).DRJIT_STRUCT, state):
+            setattr(self, k, v)
+
     def copy(self) -> "SampleStream":
         """A stream with copies of this one's arrays (symbolic loops update their state in
         place: a path replay needs real copies, not references)."""

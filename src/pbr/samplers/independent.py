@@ -25,6 +25,13 @@ class IndependentStream(SampleStream):
     def next_uint32(self) -> mi.UInt32:
         return self.rng.next_uint32()
 
+    def loop_state(self) -> tuple:
+        # A draw advances the PCG32 state; its increment (the stream's id) is constant.
+        return (self.rng.state,)
+
+    def set_loop_state(self, state: tuple) -> None:
+        self.rng.state = state[0]
+
 
 @SAMPLERS.register("independent")
 class IndependentSampler(Sampler):
