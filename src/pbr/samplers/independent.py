@@ -18,19 +18,13 @@ class IndependentStream(SampleStream):
     """A PCG32 stream: every dimension is a fresh uniform number."""
 
     _fields = {"rng": "PCG32"}
+    varying = ("rng.state",)
 
     def next_1d(self) -> mi.Float:
         return self.rng.next_float32()
 
     def next_uint32(self) -> mi.UInt32:
         return self.rng.next_uint32()
-
-    def loop_state(self) -> tuple:
-        # A draw advances the PCG32 state; its increment (the stream's id) is constant.
-        return (self.rng.state,)
-
-    def set_loop_state(self, state: tuple) -> None:
-        self.rng.state = state[0]
 
 
 @SAMPLERS.register("independent")
