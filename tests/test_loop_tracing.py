@@ -1,4 +1,5 @@
-"""The path tracers' symbolic loops are traced once per render.
+"""The path tracers' symbolic loops (path, volpath, simplepath, randomwalk) are traced
+once per render.
 
 Dr.Jit traces a loop body a second time when the loop state holds variables the body
 leaves unchanged (to drop them), which doubled the Python tracing of every render, its
@@ -103,3 +104,15 @@ def test_volpath_loop_traced_once(monkeypatch):
                 "interior": {"type": "homogeneous", "sigma_t": 2.0, "albedo": 0.8}}
     scene = pbr.load_dict(d)
     assert _body_traces(monkeypatch, "volpath", lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
+
+
+@pytest.mark.parametrize("integrator", [{"type": "simplepath"}, {"type": "simplepath", "samplelights": False},
+                                        {"type": "simplepath", "samplebsdf": False}, {"type": "randomwalk"}])
+@pytest.mark.parametrize("ior", [1.5, "glass-BK7"])
+def test_simplepath_and_randomwalk_loops_traced_once(monkeypatch, integrator, ior):
+    d = pbr.scenes.glass_caustic(8, 1)
+    d["glass"]["bsdf"] = {"type": "dielectric", "int_ior": ior}
+    d["integrator"] = integrator
+    scene = pbr.load_dict(d)
+    traces = _body_traces(monkeypatch, integrator["type"], lambda: np.asarray(pbr.render(scene, seed=1)))
+    assert traces == [1]

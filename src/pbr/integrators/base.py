@@ -418,6 +418,19 @@ def path_state(ray, active, L=None):
     return mi.Ray3f(ray), mi.Bool(active), L, mi.Spectrum(1.0), mi.UInt32(0), mi.Bool(False)
 
 
+def ray_state(ray):
+    """A path's ray as symbolic-loop state: ((origin, direction, extent), (time,
+    wavelengths)). A bounce changes the first part; the second stays, and is read from
+    outside the loop (``dr.hint(exclude=...)``): a state variable the body leaves
+    unchanged makes Dr.Jit trace the loop body twice. :func:`loop_ray` joins them."""
+    return (ray.o, ray.d, ray.maxt), (ray.time, ray.wavelengths)
+
+
+def loop_ray(varying, fixed) -> mi.Ray3f:
+    """The ray of :func:`ray_state`'s two parts."""
+    return mi.Ray3f(*varying, *fixed)
+
+
 def mis_state(ray):
     """The previous vertex that MIS weights of emitter hits refer to, at the start of a
     path: (``prev_p`` the camera ray's origin, ``prev_n`` 0, ``prev_pdf`` 1, ``prev_delta``

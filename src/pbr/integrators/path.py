@@ -22,7 +22,7 @@ from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
 from ..spectrum import first_only
 from .base import (INTEGRATORS, BACKWARD, PRIMAL, SamplingIntegrator, depth_limit, emitted_mis, forward_derivative,
-                   mis_state, path_state)
+                   loop_ray, mis_state, path_state, ray_state)
 
 
 def face_the_ray(si, ray, mask):
@@ -113,8 +113,7 @@ class PathIntegrator(SamplingIntegrator):
         dispersive = bsdfs.dispersive
         terminated = mi.Bool(False) if dispersive else None
         seen = mi.Bool(False)     # a surface whose sampled lobe is not null (hide_emitters)
-        ray_o, ray_d, ray_maxt = ray.o, ray.d, ray.maxt
-        ray_time, ray_wavelengths = ray.time, ray.wavelengths
+        ray_var, ray_fixed = ray_state(ray)
         rng_state = rng.loop_state()
 
         # The camera rays attached to a differentiated camera pose (replays only).
@@ -122,8 +121,8 @@ class PathIntegrator(SamplingIntegrator):
 
         # The body's ifs on Python values are plain ifs (mode="scalar"): a transformed if
         # would make the variables it reads (dL) variables of the body, unbound before it.
-        while dr.hint(active, label="path", exclude=[ray, rng, wl, ray_time, ray_wavelengths, dL]):
-            ray = mi.Ray3f(ray_o, ray_d, ray_maxt, ray_time, ray_wavelengths)
+        while dr.hint(active, label="path", exclude=[ray, ray_fixed, rng, wl, dL]):
+            ray = loop_ray(ray_var, ray_fixed)
             rng.set_loop_state(rng_state)
             # Replays differentiate the hit w.r.t. the geometry (it moves along the ray).
             r_ad = None
@@ -229,7 +228,7 @@ class PathIntegrator(SamplingIntegrator):
             prev_pdf = mi.Float(bs.pdf)
             prev_delta = skip | bs.delta
             ray = dr.select(skip, si.spawn_ray(ray.d), si.spawn_ray(si.to_world(bs.wo)))
-            ray_o, ray_d, ray_maxt = ray.o, ray.d, ray.maxt
+            ray_var = ray_state(ray)[0]
             depth[hit & ~skip] = depth + 1
 
             # Russian roulette (the survival probability is detached, as in Mitsuba).
