@@ -1,5 +1,5 @@
-"""The path tracers' symbolic loops (path, volpath, simplepath, randomwalk) are traced
-once per render.
+"""The path tracers' symbolic loops (path, volpath, simplepath, randomwalk, ptracer) are
+traced once per render.
 
 Dr.Jit traces a loop body a second time when the loop state holds variables the body
 leaves unchanged (to drop them), which doubled the Python tracing of every render, its
@@ -107,9 +107,10 @@ def test_volpath_loop_traced_once(monkeypatch):
 
 
 @pytest.mark.parametrize("integrator", [{"type": "simplepath"}, {"type": "simplepath", "samplelights": False},
-                                        {"type": "simplepath", "samplebsdf": False}, {"type": "randomwalk"}])
+                                        {"type": "simplepath", "samplebsdf": False}, {"type": "randomwalk"},
+                                        {"type": "ptracer", "max_depth": 6}])
 @pytest.mark.parametrize("ior", [1.5, "glass-BK7"])
-def test_simplepath_and_randomwalk_loops_traced_once(monkeypatch, integrator, ior):
+def test_simplepath_randomwalk_ptracer_loops_traced_once(monkeypatch, integrator, ior):
     d = pbr.scenes.glass_caustic(8, 1)
     d["glass"]["bsdf"] = {"type": "dielectric", "int_ior": ior}
     d["integrator"] = integrator

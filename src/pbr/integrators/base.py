@@ -418,12 +418,16 @@ def path_state(ray, active, L=None):
     return mi.Ray3f(ray), mi.Bool(active), L, mi.Spectrum(1.0), mi.UInt32(0), mi.Bool(False)
 
 
-def ray_state(ray):
+def ray_state(ray, extent: bool = True):
     """A path's ray as symbolic-loop state: ((origin, direction, extent), (time,
     wavelengths)). A bounce changes the first part; the second stays, and is read from
     outside the loop (``dr.hint(exclude=...)``): a state variable the body leaves
-    unchanged makes Dr.Jit trace the loop body twice. :func:`loop_ray` joins them."""
-    return (ray.o, ray.d, ray.maxt), (ray.time, ray.wavelengths)
+    unchanged makes Dr.Jit trace the loop body twice. :func:`loop_ray` joins them.
+    ``extent=False``: the extent stays too (rays of the largest extent throughout, as
+    light paths have: ((origin, direction), (extent, time, wavelengths)))."""
+    if extent:
+        return (ray.o, ray.d, ray.maxt), (ray.time, ray.wavelengths)
+    return (ray.o, ray.d), (ray.maxt, ray.time, ray.wavelengths)
 
 
 def loop_ray(varying, fixed) -> mi.Ray3f:
