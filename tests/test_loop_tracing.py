@@ -1,5 +1,5 @@
-"""The path tracers' symbolic loops (path, volpath, simplepath, randomwalk, ptracer) are
-traced once per render.
+"""The path tracers' symbolic loops (path, volpath, simplevolpath, simplepath, randomwalk,
+ptracer) are traced once per render.
 
 Dr.Jit traces a loop body a second time when the loop state holds variables the body
 leaves unchanged (to drop them), which doubled the Python tracing of every render, its
@@ -96,14 +96,15 @@ def test_path_loops_of_derivatives_traced_once(monkeypatch):
         monkeypatch.undo()
 
 
-def test_volpath_loop_traced_once(monkeypatch):
-    """On a scene with a medium (without media, the spectral MIS ratio r_u and the
-    medium index stay constant, and the loop is still traced twice)."""
-    d = _cornell(integrator={"type": "volpath", "max_depth": 5})
+@pytest.mark.parametrize("integrator", ["volpath", "simplevolpath"])
+def test_volpath_loops_traced_once(monkeypatch, integrator):
+    """On a scene with a medium (without media, the medium index, and volpath's spectral
+    MIS ratio r_u, stay constant, and the loop is still traced twice)."""
+    d = _cornell(integrator={"type": integrator, "max_depth": 5})
     d["fog"] = {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": 0.3, "bsdf": {"type": "null"},
                 "interior": {"type": "homogeneous", "sigma_t": 2.0, "albedo": 0.8}}
     scene = pbr.load_dict(d)
-    assert _body_traces(monkeypatch, "volpath", lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
+    assert _body_traces(monkeypatch, integrator, lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
 
 
 @pytest.mark.parametrize("integrator", [{"type": "simplepath"}, {"type": "simplepath", "samplelights": False},

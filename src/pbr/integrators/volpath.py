@@ -374,13 +374,16 @@ class SimpleVolPathIntegrator(_MediumAware):
         valid = mi.Bool(False)
         ray = mi.Ray3f(ray)
         has_media = len(media) > 0
-        while dr.hint(active, label="simplevolpath"):
+        # Not loop state (see volpath's loop): the wavelengths, the stream's constants.
+        rng_state = rng.loop_state()
+        while dr.hint(active, label="simplevolpath", exclude=[rng, wl]):
+            rng.set_loop_state(rng_state)
             si, shape = geo.intersect(ray, active)
             hit = si.is_valid()
             scattered = mi.Bool(False)
             absorbed = mi.Bool(False)
             p_sc = mi.Point3f(0.0)
-            if has_media:
+            if dr.hint(has_media, mode="scalar"):
                 L, beta, p_sc, scattered, absorbed = volume.free_flight(
                     media, rng, ray, medium, dr.select(hit, si.t, dr.inf), wl, active & (medium > 0),
                     (L, beta, p_sc, scattered, absorbed), self._delta_tracking, (media, depth, max_depth))
@@ -388,7 +391,7 @@ class SimpleVolPathIntegrator(_MediumAware):
             light = lights.light_of_hit(scene, shape, si, surf)
             on = surf & (light > 0)
             L[on] = L + beta * lights.L(light - 1, si, wl, on)[0]
-            if lights.has_infinite:
+            if dr.hint(lights.has_infinite, mode="scalar"):
                 esc = active & ~scattered & ~absorbed & ~hit
                 for Le_inf, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), esc):
                     L[esc] = L + beta * Le_inf[0]
@@ -403,5 +406,7 @@ class SimpleVolPathIntegrator(_MediumAware):
             ray, medium = volume.next_ray(scene, shape, si, ray, medium, wi, p_sc, sc, cont, rs, skip)
             depth[at_vertex] = depth + 1
             active = skip | (cont & (beta > 0))
+            rng_state = rng.loop_state()
+        rng.set_loop_state(rng_state)
         # Only the first wavelength was traced: it stands for all four.
         return first_only(mi.Spectrum(L)), valid
