@@ -62,6 +62,9 @@ class BSDFType:
     # ``null_transmission(ctx, idx, active)`` gives its weight, which shadow rays of the
     # volumetric integrators are multiplied by when they cross the surface.
     null_lobe = False
+    # Whether a sample can cross into another medium (``BSDFSample.eta`` other than 1):
+    # path tracers keep the relative IOR for Russian roulette only where some family does.
+    refracts = False
 
     def __init__(self):
         self.instances: list = []

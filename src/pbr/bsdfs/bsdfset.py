@@ -280,6 +280,12 @@ class BSDFSet:
         """Whether some BSDF refracts by a wavelength-dependent IOR."""
         return any(getattr(f, "dispersive", False) for f in self.families.values())
 
+    @property
+    def refracts(self) -> bool:
+        """Whether some BSDF's samples can have a relative IOR other than 1 (Russian
+        roulette then scales by it)."""
+        return any(f.refracts for f in self.families.values())
+
     def has_flag(self, flag: int) -> bool:
         return any(f.flags & flag for f in self.families.values())
 

@@ -153,6 +153,7 @@ class _Dielectric(BSDFType):
     """Shared parsing and parameter tables: eta and the two optional spectral scales."""
 
     _rough = False   # rough interfaces need int_ior != ext_ior
+    refracts = True
 
     def _add_common(self, loader, props, inst: dict) -> None:
         inst["eta"], inst["int_slot"], inst["ext_slot"] = _eta(loader, props, self._rough)
@@ -282,6 +283,7 @@ class ThinDielectric(_Dielectric):
     name = "thindielectric"
     flags = REFLECTION | TRANSMISSION | SPECULAR
     null_lobe = True
+    refracts = False   # light leaves the slab into the medium it came from
 
     def _reflectance(self, ctx, idx, cos, active):
         r = fresnel_dielectric(dr.abs(cos), self._eta_of(ctx, idx, active))[0]

@@ -121,6 +121,7 @@ class _Params:
 # ---------------------------------------------------------------- shared family
 
 class _PrincipledFamily(BSDFType):
+    refracts = True
     # (name, default) of textures always present, and of optional lobe parameters.
     _ALWAYS: tuple = ()
     _OPTIONAL: tuple = ()

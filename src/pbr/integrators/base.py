@@ -418,6 +418,23 @@ def path_state(ray, active, L=None):
     return mi.Ray3f(ray), mi.Bool(active), L, mi.Spectrum(1.0), mi.UInt32(0), mi.Bool(False)
 
 
+def ray_state(ray, extent: bool = True):
+    """A path's ray as symbolic-loop state: ((origin, direction, extent), (time,
+    wavelengths)). A bounce changes the first part; the second stays, and is read from
+    outside the loop (``dr.hint(exclude=...)``): a state variable the body leaves
+    unchanged makes Dr.Jit trace the loop body twice. :func:`loop_ray` joins them.
+    ``extent=False``: the extent stays too (rays of the largest extent throughout, as
+    light paths have: ((origin, direction), (extent, time, wavelengths)))."""
+    if extent:
+        return (ray.o, ray.d, ray.maxt), (ray.time, ray.wavelengths)
+    return (ray.o, ray.d), (ray.maxt, ray.time, ray.wavelengths)
+
+
+def loop_ray(varying, fixed) -> mi.Ray3f:
+    """The ray of :func:`ray_state`'s two parts."""
+    return mi.Ray3f(*varying, *fixed)
+
+
 def mis_state(ray):
     """The previous vertex that MIS weights of emitter hits refer to, at the start of a
     path: (``prev_p`` the camera ray's origin, ``prev_n`` 0, ``prev_pdf`` 1, ``prev_delta``
@@ -498,9 +515,17 @@ def _develop(sums, w, h, film=None):
     """The film's image from per-pixel sums (w X, w Y, w Z, w, then weighted extra
     channels): XYZ / w through the film's sensor matrix, converted to linear sRGB (left
     out by films without RGB), extra channels / w appended. Stays on the device (no host
-    round trip), so a whole render can be recorded by ``dr.freeze``."""
+    round trip), so a whole render can be recorded by ``dr.freeze``. One lane per output
+    value picks its channel: one small kernel, without scatters (scatters into one image
+    made a kernel each)."""
     n_ch = dr.width(sums) // (w * h)
-    pixel = dr.arange(mi.UInt32, w * h)
+    keeps_rgb = getattr(film, "keeps_rgb", True)
+    n_out = (3 if keeps_rgb else 0) + n_ch - 4
+    if n_out <= 0:
+        return mi.TensorXf(dr.zeros(mi.Float, 0), (h, w, 0))
+    lane = dr.arange(mi.UInt32, w * h * n_out)
+    pixel = lane // n_out
+    channel = lane - pixel * n_out
     ch = [dr.gather(mi.Float, sums, pixel * n_ch + k) for k in range(n_ch)]
     inv_w = dr.rcp(dr.maximum(ch[3], 1e-30))
     xyz = mi.Array3f(ch[0], ch[1], ch[2]) * inv_w
@@ -508,12 +533,12 @@ def _develop(sums, w, h, film=None):
     if m is not None:
         m = np.asarray(m, np.float64).tolist()
         xyz = mi.Array3f(*[m[r][0] * xyz[0] + m[r][1] * xyz[1] + m[r][2] * xyz[2] for r in range(3)])
-    rgb = [*spec.xyz_to_srgb(xyz)] if getattr(film, "keeps_rgb", True) else []
+    rgb = [*spec.xyz_to_srgb(xyz)] if keeps_rgb else []
     out = rgb + [c * inv_w for c in ch[4:]]
-    img = dr.zeros(mi.Float, w * h * len(out))
-    for k, v in enumerate(out):
-        dr.scatter(img, v, pixel * len(out) + k)
-    return mi.TensorXf(img, (h, w, len(out)))
+    img = out[-1]
+    for k in range(n_out - 2, -1, -1):
+        img = dr.select(channel == k, out[k], img)
+    return mi.TensorXf(img, (h, w, n_out))
 
 
 def _progress(n_pass, progress, desc="pbr render", unit="pass"):

@@ -22,7 +22,7 @@ from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
 from ..spectrum import first_only
 from .base import (INTEGRATORS, BACKWARD, PRIMAL, SamplingIntegrator, depth_limit, emitted_mis, forward_derivative,
-                   mis_state, path_state)
+                   loop_ray, mis_state, path_state, ray_state)
 
 
 def face_the_ray(si, ray, mask):
@@ -102,24 +102,36 @@ class PathIntegrator(SamplingIntegrator):
 
         ray, active, L, beta, depth, valid = path_state(ray, active, None if primal else L_in)
         prev_p, prev_n, prev_pdf, prev_delta = mis_state(ray)
-        dL_fwd = mi.Spectrum(0.0)
-        eta = mi.Float(1.0)
-        terminated = mi.Bool(False)
+        # The loop state holds only what a bounce changes: Dr.Jit traces the body a second
+        # time to drop state variables that come back unchanged (a render's largest fixed
+        # cost). So the ray's time and wavelengths, the sample stream's constants, the
+        # wavelengths and a replay's adjoint radiance dL stay outside it, and the forward
+        # derivative, the relative IOR and the dispersion flag are state only where they
+        # can change.
+        dL_fwd = None if primal or mode == BACKWARD else mi.Spectrum(0.0)
+        eta = mi.Float(1.0) if bsdfs.refracts else None
         dispersive = bsdfs.dispersive
+        terminated = mi.Bool(False) if dispersive else None
         seen = mi.Bool(False)     # a surface whose sampled lobe is not null (hide_emitters)
+        ray_var, ray_fixed = ray_state(ray)
+        rng_state = rng.loop_state()
 
         # The camera rays attached to a differentiated camera pose (replays only).
         ray_ad = None if primal else self.primary_ray_ad
 
-        while dr.hint(active, label="path"):
+        # The body's ifs on Python values are plain ifs (mode="scalar"): a transformed if
+        # would make the variables it reads (dL) variables of the body, unbound before it.
+        while dr.hint(active, label="path", exclude=[ray, ray_fixed, rng, wl, dL]):
+            ray = loop_ray(ray_var, ray_fixed)
+            rng.set_loop_state(rng_state)
             # Replays differentiate the hit w.r.t. the geometry (it moves along the ray).
             r_ad = None
-            if ray_ad is not None:
+            if dr.hint(ray_ad is not None, mode="scalar"):
                 with dr.resume_grad():
                     r_ad = dr.select(depth == 0, ray_ad, ray)
             si, shape = geo.intersect(ray, active, attached=not primal, ray_ad=r_ad)
             hit = active & si.is_valid()
-            if self.face_first_hit:
+            if dr.hint(self.face_first_hit, mode="scalar"):
                 si = face_the_ray(si, ray, hit & (depth == 0))
             valid |= hit
 
@@ -131,7 +143,7 @@ class PathIntegrator(SamplingIntegrator):
             on_light &= ~skip
             # Rays leaving the scene see the infinite lights (MIS against NEE).
             escaped = active & ~si.is_valid()
-            if self.hide_emitters:
+            if dr.hint(self.hide_emitters, mode="scalar"):
                 escaped &= seen if self.hide_through_null else depth > 0
             with dr.resume_grad(when=not primal):
                 # Without next-event estimation only BSDF sampling finds emitters: weight 1
@@ -183,9 +195,9 @@ class PathIntegrator(SamplingIntegrator):
             seen |= hit & ~skip & ~bs.null
             cont = active_next & (bs.pdf > 0)
 
-            if primal:
+            if dr.hint(primal, mode="scalar"):
                 L = L + Le + Ld
-                if dispersive:
+                if dr.hint(dispersive, mode="scalar"):
                     # Wavelength-dependent refraction: only the first wavelength goes on,
                     # standing for all four (pbrt-v4's TerminateSecondary, applied to the
                     # radiance and throughput instead of the wavelength densities).
@@ -202,30 +214,34 @@ class PathIntegrator(SamplingIntegrator):
                     ratio = dr.select(f_det != 0, f_bs * dr.rcp(dr.detach(f_det)), 0.0)
                     Lr = L * dr.replace_grad(mi.Spectrum(1.0), ratio)
                     Lo = Le + Ld + dr.select(cont, Lr, 0.0)
-                    if mode == BACKWARD:
+                    if dr.hint(mode == BACKWARD, mode="scalar"):
                         # AllowNoGrad: a parameter may not reach this vertex at all.
                         dr.backward_from(dL * Lo, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
                     else:
                         dL_fwd += forward_derivative(Lo)
 
             beta[~skip] = beta * bs.weight
-            eta[~skip] = eta * bs.eta
+            if dr.hint(eta is not None, mode="scalar"):
+                eta[~skip] = eta * bs.eta
             prev_p = mi.Point3f(dr.detach(si.p))
             prev_n = mi.Normal3f(dr.detach(si.n))
             prev_pdf = mi.Float(bs.pdf)
             prev_delta = skip | bs.delta
             ray = dr.select(skip, si.spawn_ray(ray.d), si.spawn_ray(si.to_world(bs.wo)))
+            ray_var = ray_state(ray)[0]
             depth[hit & ~skip] = depth + 1
 
             # Russian roulette (the survival probability is detached, as in Mitsuba).
             b_max = dr.max(beta)
-            q = dr.minimum(b_max * eta * eta, 0.95)
+            q = dr.minimum(b_max * eta * eta if eta is not None else b_max, 0.95)
             rr = (depth >= self.rr_depth) & ~skip
             survive = rng.next_float32() < q
             beta[rr] = beta * dr.rcp(dr.detach(q))
             active = skip | (cont & (~rr | survive) & (b_max > 0))
+            rng_state = rng.loop_state()
 
-        return (L if primal else dL_fwd), valid
+        rng.set_loop_state(rng_state)
+        return (L if primal else mi.Spectrum(0.0) if dL_fwd is None else dL_fwd), valid
 
 
 @INTEGRATORS.register("prb_basic")

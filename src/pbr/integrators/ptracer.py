@@ -10,10 +10,10 @@ import mitsuba as mi
 import numpy as np
 
 from ..bsdfs.base import ShadingContext
-from ..samplers import IndependentSampler, seed_array
+from ..samplers import IndependentSampler, IndependentStream, seed_array
 from ..spectrum import SampledWavelengths, first_only
 from ..plugins.props import SceneError
-from .base import INTEGRATORS, SamplingIntegrator, _progress
+from .base import INTEGRATORS, SamplingIntegrator, _progress, loop_ray, ray_state
 from .lightpath import (SplatFilm, connect_to_camera, sample_importance, shading_correction,
                         start_light_path)
 
@@ -87,7 +87,7 @@ class ParticleTracerIntegrator(SamplingIntegrator):
         idx = dr.arange(mi.UInt32, n)
         pixel = idx // per_pass
         sample_index = pixel * spp + dr.opaque(mi.UInt32, pass_index) * per_pass + (idx - pixel * per_pass)
-        rng = IndependentSampler.make_rng(sample_index, seed_array(seed))
+        rng = IndependentStream(rng=IndependentSampler.make_rng(sample_index, seed_array(seed)))
         wl = SampledWavelengths.sample_visible(rng.next_float32())
         active = mi.Bool(True)
         if self.max_depth == 0:
@@ -129,12 +129,20 @@ class ParticleTracerIntegrator(SamplingIntegrator):
         dispersive = bsdfs.dispersive
 
         ls, ray, beta = start_light_path(scene, self.emission_sampler, rng, wl, active)
-        eta = mi.Float(1.0)
         depth = mi.UInt32(1)            # segments so far (Mitsuba's count)
-        terminated = mi.Bool(False)
+        # Loop state: only what a bounce changes (see path): the relative IOR and the
+        # dispersion flag only where they can change; the ray's time and wavelengths,
+        # the stream's constants and the wavelengths outside. Ifs on Python values are
+        # plain ifs, so that the excluded variables they read stay outside.
+        eta = mi.Float(1.0) if bsdfs.refracts else None
+        terminated = mi.Bool(False) if dispersive else None
         active = mi.Bool(active) & (ls.pdf_dir > 0) & (dr.max(beta) > 0) & (depth < max_depth)
+        ray_var, ray_fixed = ray_state(ray, extent=False)   # spawned rays: the largest extent
+        rng_state = rng.loop_state()
 
-        while dr.hint(active, label="ptracer"):
+        while dr.hint(active, label="ptracer", exclude=[ray, ray_fixed, rng, wl]):
+            ray = loop_ray(ray_var, ray_fixed)
+            rng.set_loop_state(rng_state)
             si, shape = geo.intersect(ray, active)
             active &= si.is_valid()
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, active)
@@ -150,8 +158,9 @@ class ParticleTracerIntegrator(SamplingIntegrator):
             wo = si.to_world(bs.wo)
             corr, side_ok = shading_correction(si, -ray.d, wo)
             beta *= bs.weight * corr
-            eta *= bs.eta
-            if dispersive:
+            if dr.hint(eta is not None, mode="scalar"):
+                eta *= bs.eta
+            if dr.hint(dispersive, mode="scalar"):
                 # Wavelength-dependent refraction: the first wavelength stands for all.
                 term = active & bs.terminate & ~terminated
                 beta[term] = first_only(beta)
@@ -161,9 +170,12 @@ class ParticleTracerIntegrator(SamplingIntegrator):
             active &= depth < max_depth
 
             # Russian roulette (Mitsuba's ptracer: beyond rr_depth segments).
-            q = dr.minimum(dr.max(beta) * eta * eta, 0.95)
+            q = dr.minimum(dr.max(beta) * eta * eta if eta is not None else dr.max(beta), 0.95)
             rr = depth > self.rr_depth
             survive = rng.next_float32() < q
             beta[rr] = beta * dr.rcp(q)
             active &= ~rr | survive
             ray = si.spawn_ray(wo)
+            ray_var = ray_state(ray, extent=False)[0]
+            rng_state = rng.loop_state()
+        rng.set_loop_state(rng_state)

@@ -20,7 +20,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..bsdfs.base import ShadingContext
-from .base import INTEGRATORS, SamplingIntegrator, path_state, pbrt_max_depth
+from .base import INTEGRATORS, SamplingIntegrator, loop_ray, path_state, pbrt_max_depth, ray_state
 from .direct import hit_emission
 
 
@@ -58,16 +58,22 @@ class RandomWalkIntegrator(SamplingIntegrator):
     def _sample(self, scene, rng, ray, wl, active):
         geo, lights, bsdfs = scene.geometry, scene.lights, scene.bsdfs
         ray, active, L, beta, depth, valid = path_state(ray, active)
-        while dr.hint(active, label="randomwalk"):
+        # Loop state: only what a bounce changes (see path); the ifs on Python values
+        # are plain ifs, so that the excluded variables they read stay outside.
+        ray_var, ray_fixed = ray_state(ray)
+        rng_state = rng.loop_state()
+        while dr.hint(active, label="randomwalk", exclude=[ray, ray_fixed, rng, wl]):
+            ray = loop_ray(ray_var, ray_fixed)
+            rng.set_loop_state(rng_state)
             si, shape = geo.intersect(ray, active)
             hit = active & si.is_valid()
             valid |= hit
             Le, light = hit_emission(scene, si, shape, wl, hit)
             skip = hit & (light > 0) & (depth == 0) if self.hide_emitters else mi.Bool(False)
             L += dr.select(skip, 0.0, beta * Le)
-            if lights.has_infinite:
+            if dr.hint(lights.has_infinite, mode="scalar"):
                 escaped = active & ~hit
-                if self.hide_emitters:
+                if dr.hint(self.hide_emitters, mode="scalar"):
                     escaped &= depth > 0
                 for Le_inf, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), escaped):
                     L += dr.select(escaped, beta * Le_inf, 0.0)
@@ -81,6 +87,9 @@ class RandomWalkIntegrator(SamplingIntegrator):
             beta[go & ~null] = beta * f * (4.0 * math.pi)
             through = skip | null
             ray = dr.select(through, si.spawn_ray(ray.d), si.spawn_ray(wp))
+            ray_var = ray_state(ray)[0]
             depth[hit & ~skip] = depth + 1
             active = through | (go & dr.any(beta != 0.0))
+            rng_state = rng.loop_state()
+        rng.set_loop_state(rng_state)
         return L, valid

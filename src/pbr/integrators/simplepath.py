@@ -24,7 +24,7 @@ import mitsuba as mi
 
 from ..bsdfs.base import REFLECTION, TRANSMISSION, ShadingContext
 from ..spectrum import first_only
-from .base import INTEGRATORS, SamplingIntegrator, path_state, pbrt_max_depth
+from .base import INTEGRATORS, SamplingIntegrator, loop_ray, path_state, pbrt_max_depth, ray_state
 from .direct import hit_emission
 
 # How a direction is drawn without BSDF sampling (per BSDF entry).
@@ -108,8 +108,14 @@ class SimplePathIntegrator(SamplingIntegrator):
         geo, lights, bsdfs = scene.geometry, scene.lights, scene.bsdfs
         ray, active, L, beta, depth, valid = path_state(ray, active)
         specular = mi.Bool(True)
-        terminated = mi.Bool(False)
-        while dr.hint(active, label="simplepath"):
+        # Loop state: only what a bounce changes (see path); the ifs on Python values
+        # are plain ifs, so that the excluded variables they read stay outside.
+        terminated = mi.Bool(False) if bsdfs.dispersive and self.sample_bsdf else None
+        ray_var, ray_fixed = ray_state(ray)
+        rng_state = rng.loop_state()
+        while dr.hint(active, label="simplepath", exclude=[ray, ray_fixed, rng, wl, uniform_kind]):
+            ray = loop_ray(ray_var, ray_fixed)
+            rng.set_loop_state(rng_state)
             si, shape = geo.intersect(ray, active)
             hit = active & si.is_valid()
             valid |= hit
@@ -118,9 +124,9 @@ class SimplePathIntegrator(SamplingIntegrator):
             Le, light = hit_emission(scene, si, shape, wl, hit)
             skip = hit & (light > 0) & (depth == 0) if self.hide_emitters else mi.Bool(False)
             L += dr.select(count & ~skip, beta * Le, 0.0)
-            if lights.has_infinite:
+            if dr.hint(lights.has_infinite, mode="scalar"):
                 escaped = active & ~hit & count
-                if self.hide_emitters:
+                if dr.hint(self.hide_emitters, mode="scalar"):
                     escaped &= depth > 0
                 for Le_inf, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), escaped):
                     L += dr.select(escaped, beta * Le_inf, 0.0)
@@ -131,7 +137,7 @@ class SimplePathIntegrator(SamplingIntegrator):
             scatter = go & ~null
             ctx = ShadingContext(si, wl)
 
-            if self.sample_lights:
+            if dr.hint(self.sample_lights, mode="scalar"):
                 u_light = rng.next_float32()
                 u_pos = rng.next_2d()
                 lit = scatter & bsdfs.smooth(bsdf_id, scatter)
@@ -147,6 +153,9 @@ class SimplePathIntegrator(SamplingIntegrator):
             specular |= null | skip
             through = skip | null
             ray = dr.select(through, si.spawn_ray(ray.d), si.spawn_ray(wi))
+            ray_var = ray_state(ray)[0]
             depth[hit & ~skip] = depth + 1
             active = through | (scatter & dr.any(beta != 0.0))
+            rng_state = rng.loop_state()
+        rng.set_loop_state(rng_state)
         return L, valid

@@ -201,10 +201,14 @@ class VolPathIntegrator(_MediumAware):
         r_l = mi.Spectrum(1.0)
         eta = mi.Float(1.0)
         medium = mi.UInt32(self._medium)
-        terminated = mi.Bool(False)
+        # Only what a bounce changes is loop state (see path's loop): not the wavelengths
+        # nor the sample stream's constants, and the dispersion flag only with dispersion.
+        terminated = mi.Bool(False) if bsdfs.dispersive else None
         n_null = mi.UInt32(0)
+        rng_state = rng.loop_state()
 
-        while dr.hint(active, label="volpath"):
+        while dr.hint(active, label="volpath", exclude=[rng, wl]):
+            rng.set_loop_state(rng_state)
             si, shape = geo.intersect(ray, active)
             hit = si.is_valid()
             t_hit = dr.select(hit, si.t, dr.inf)
@@ -213,7 +217,9 @@ class VolPathIntegrator(_MediumAware):
             scattered = mi.Bool(False)
             absorbed = mi.Bool(False)
             p_sc = mi.Point3f(0.0)
-            if has_media:
+            # Plain Python ifs in this body (mode="scalar"): a transformed one would make the
+            # variables it reads (rng, wl) variables of the body, unbound before it.
+            if dr.hint(has_media, mode="scalar"):
                 in_m = active & (medium > 0)
                 L, beta, r_u, r_l, T_acc, p_sc, scattered, absorbed, n_null = volume.free_flight(
                     media, rng, ray, medium, t_hit, wl, in_m,
@@ -237,9 +243,9 @@ class VolPathIntegrator(_MediumAware):
             pdf_light = lights.pdf_Li(self.light_sampler, light - 1, prev_p, prev_n, si, on_light & ~prev_delta)
             denom = dr.select(prev_delta, dr.mean(r_u), dr.mean(r_u + r_l * pdf_light))
             L[on_light] = L + beta * Le * dr.rcp(denom)
-            if lights.has_infinite:
+            if dr.hint(lights.has_infinite, mode="scalar"):
                 escaped = active & ~scattered & ~absorbed & ~hit
-                if self.hide_emitters:
+                if dr.hint(self.hide_emitters, mode="scalar"):
                     escaped &= depth > 0
                 for Le_inf, pdf_inf in lights.Le_escaped(ray.d, wl, prev_p, prev_n, escaped, self.light_sampler):
                     d_inf = dr.select(prev_delta, dr.mean(r_u), dr.mean(r_u + r_l * pdf_inf))
@@ -250,7 +256,7 @@ class VolPathIntegrator(_MediumAware):
             valid |= at_vertex
             rs_sample = rs
             lobe = mi.Bool(False)
-            if bsdfs.has_null_lobes:
+            if dr.hint(bsdfs.has_null_lobes, mode="scalar"):
                 # A null lobe (thindielectric's transmission) is no bounce (Mitsuba's
                 # volpath): such surfaces are sampled at the depth limit too.
                 lobe = real & bsdfs.has_null_lobe(bsdf_id, real) & (depth < max_depth)
@@ -269,7 +275,7 @@ class VolPathIntegrator(_MediumAware):
             u1 = rng.next_float32()
             u2 = rng.next_2d()
             f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs_sample)
-            if has_media:
+            if dr.hint(has_media, mode="scalar"):
                 f_em, pdf_em = volume.phase_nee(media, medium, ray, ls.wi, sc, f_em, pdf_em)
             sray, s_med = volume.shadow_ray(scene, shape, si, ls, sc, p_sc, medium, nee & rs)
             T_ray, tr_u, tr_l, n_shadow = volume.transmittance(
@@ -282,10 +288,10 @@ class VolPathIntegrator(_MediumAware):
 
             # -- continue: sample the BSDF or the phase function -------------------------
             wi_next, pdf_next, w_next, delta_next = volume.sample_direction(media, medium, ray, si, bs, sc, rng)
-            if bsdfs.has_null_lobes:
+            if dr.hint(bsdfs.has_null_lobes, mode="scalar"):
                 volume.cross_null_lobe(bs, lobe, beta, go_on, rs, at_vertex, skip)
             cont = go_on & (pdf_next > 0)
-            if bsdfs.dispersive:
+            if dr.hint(bsdfs.dispersive, mode="scalar"):
                 term = rs & bs.terminate & ~terminated
                 L[term] = first_only(L)
                 beta[term] = first_only(beta)
@@ -306,7 +312,9 @@ class VolPathIntegrator(_MediumAware):
             survive = rng.next_float32() < q
             beta[rr] = beta * dr.rcp(q)
             active = skip | (cont & (~rr | survive) & (dr.max(beta) > 0))
+            rng_state = rng.loop_state()
 
+        rng.set_loop_state(rng_state)
         return L, valid
 
 
@@ -366,13 +374,16 @@ class SimpleVolPathIntegrator(_MediumAware):
         valid = mi.Bool(False)
         ray = mi.Ray3f(ray)
         has_media = len(media) > 0
-        while dr.hint(active, label="simplevolpath"):
+        # Not loop state (see volpath's loop): the wavelengths, the stream's constants.
+        rng_state = rng.loop_state()
+        while dr.hint(active, label="simplevolpath", exclude=[rng, wl]):
+            rng.set_loop_state(rng_state)
             si, shape = geo.intersect(ray, active)
             hit = si.is_valid()
             scattered = mi.Bool(False)
             absorbed = mi.Bool(False)
             p_sc = mi.Point3f(0.0)
-            if has_media:
+            if dr.hint(has_media, mode="scalar"):
                 L, beta, p_sc, scattered, absorbed = volume.free_flight(
                     media, rng, ray, medium, dr.select(hit, si.t, dr.inf), wl, active & (medium > 0),
                     (L, beta, p_sc, scattered, absorbed), self._delta_tracking, (media, depth, max_depth))
@@ -380,7 +391,7 @@ class SimpleVolPathIntegrator(_MediumAware):
             light = lights.light_of_hit(scene, shape, si, surf)
             on = surf & (light > 0)
             L[on] = L + beta * lights.L(light - 1, si, wl, on)[0]
-            if lights.has_infinite:
+            if dr.hint(lights.has_infinite, mode="scalar"):
                 esc = active & ~scattered & ~absorbed & ~hit
                 for Le_inf, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), esc):
                     L[esc] = L + beta * Le_inf[0]
@@ -395,5 +406,7 @@ class SimpleVolPathIntegrator(_MediumAware):
             ray, medium = volume.next_ray(scene, shape, si, ray, medium, wi, p_sc, sc, cont, rs, skip)
             depth[at_vertex] = depth + 1
             active = skip | (cont & (beta > 0))
+            rng_state = rng.loop_state()
+        rng.set_loop_state(rng_state)
         # Only the first wavelength was traced: it stands for all four.
         return first_only(mi.Spectrum(L)), valid

@@ -96,6 +96,30 @@ class SampleStream(Struct):
         """The position inside the pixel (the filter's sample): the sampler's best 2D pair."""
         return self.next_2d()
 
+    # The arrays a draw changes, as field names or "field.attribute" (a PCG32's "state";
+    # its "inc" is the stream's constant id); None: every field.
+    varying = None
+
+    def _varying(self) -> tuple:
+        return self.varying or tuple(type(self).DRJIT_STRUCT)
+
+    def loop_state(self) -> tuple:
+        """The arrays a draw changes (:attr:`varying`): what a symbolic loop that draws
+        from this stream carries. The stream itself stays outside the loop state, so its
+        constant arrays do not make Dr.Jit trace the loop body twice."""
+        out = []
+        for name in self._varying():
+            obj, _, attr = name.rpartition(".")
+            out.append(getattr(getattr(self, obj) if obj else self, attr))
+        return tuple(out)
+
+    def set_loop_state(self, state: tuple) -> None:
+        """Set the arrays :meth:`loop_state` returned (at the start of a loop iteration,
+        and after the loop)."""
+        for name, v in zip(self._varying(), state):
+            obj, _, attr = name.rpartition(".")
+            setattr(getattr(self, obj) if obj else self, attr, v)
+
     def copy(self) -> "SampleStream":
         """A stream with copies of this one's arrays (symbolic loops update their state in
         place: a path replay needs real copies, not references)."""

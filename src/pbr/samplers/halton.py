@@ -28,6 +28,7 @@ class HaltonStream(SampleStream):
     dimension d uses the radical inverse in the d-th prime."""
 
     _fields = {"index": "UInt32", "dim": "UInt32", "seed": "UInt32"}
+    varying = ("dim",)
 
     def pixel_2d(self):
         # Dimensions 0 and 1 (bases 2 and 3) without their first digits, which the index

@@ -18,6 +18,7 @@ class IndependentStream(SampleStream):
     """A PCG32 stream: every dimension is a fresh uniform number."""
 
     _fields = {"rng": "PCG32"}
+    varying = ("rng.state",)
 
     def next_1d(self) -> mi.Float:
         return self.rng.next_float32()

@@ -186,6 +186,7 @@ class PMJ02BNStream(SampleStream):
     dimension."""
 
     _fields = {"px": "UInt32", "py": "UInt32", "index": "UInt32", "dim": "UInt32", "seed": "UInt32"}
+    varying = ("dim",)
     # constants: spp, spp4 (spp rounded up to a power of 4 = 4^level), tile (pixel tile side)
 
     def _offset(self, dim):

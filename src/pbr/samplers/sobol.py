@@ -59,6 +59,7 @@ class SobolStream(SampleStream):
     """A sample of the global Sobol' sequence: ``index`` is its index in the sequence."""
 
     _fields = {"index": "UInt32", "dim": "UInt32", "seed": "UInt32"}
+    varying = ("dim",)
     # constants (class attributes of the per-render subclass): m (the film is covered by
     # 2^m x 2^m pixels), nbits (index bits), randomization
 
@@ -159,6 +160,7 @@ class PaddedSobolStream(SampleStream):
     sample order and scrambles its own copy of Sobol' dimensions 0 (and 1)."""
 
     _fields = {"pixel": "UInt32", "index": "UInt32", "dim": "UInt32", "seed": "UInt32"}
+    varying = ("dim",)
 
     def _shuffled(self):
         h = hash_u32(self.pixel, self.dim, self.seed)
@@ -220,6 +222,7 @@ class ZSobolStream(SampleStream):
     ``ZSobolSampler``): neighbouring pixels get well-distributed, decorrelated points."""
 
     _fields = {"morton": "UInt32", "dim": "UInt32", "seed": "UInt32"}
+    varying = ("dim",)
 
     def _index(self):
         """The sequence index of this sample for the current dimension."""
@@ -288,6 +291,7 @@ class LDStream(SampleStream):
     permutation per dimension) and the (0,2)-sequence XOR-scrambled (per pixel)."""
 
     _fields = {"index": "UInt32", "dim": "UInt32", "key": "UInt32"}
+    varying = ("dim",)
 
     def _shuffled(self):
         return mi.permute_kensler(self.index, self.spp, self.key + self.dim)

@@ -24,6 +24,9 @@ class StratifiedStream(SampleStream):
     _fields = {"index": "UInt32", "dim": "UInt32", "key": "UInt32", "rng": "PCG32"}
     # constants: count (strata in 1D), nx, ny (the 2D grid), jitter
 
+    def _varying(self):
+        return ("dim", "rng.state") if self.jitter else ("dim",)
+
     def _jitter(self):
         return self.rng.next_float32() if self.jitter else mi.Float(0.5)
 

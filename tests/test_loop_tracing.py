@@ -1,0 +1,120 @@
+"""The path tracers' symbolic loops (path, volpath, simplevolpath, simplepath, randomwalk,
+ptracer) are traced once per render.
+
+Dr.Jit traces a loop body a second time when the loop state holds variables the body
+leaves unchanged (to drop them), which doubled the Python tracing of every render, its
+largest fixed cost (docs/performance.md, "Per-render fixed cost"). ``path`` and
+``volpath`` keep such variables out of their loop state: the wavelengths, the ray's time
+and wavelengths, the sample stream's constants (``SampleStream.varying``), and the
+relative IOR, dispersion flag and forward derivative where they cannot change. These
+tests count the traces of the loop bodies; a state variable that comes back unchanged
+makes them fail."""
+
+import drjit as dr
+import numpy as np
+import pytest
+
+import pbr
+from pbr.samplers import SAMPLERS
+
+
+def _body_traces(monkeypatch, label, fn):
+    """Run ``fn()`` and return, per ``dr.while_loop`` call labelled ``label``, how many
+    times its body was traced."""
+    traces = []
+    orig = dr.while_loop
+
+    def counting(state, cond, body, *args, **kw):
+        name = kw.get("label", args[1] if len(args) > 1 else None)
+        if name != label:
+            return orig(state, cond, body, *args, **kw)
+        traces.append(0)
+        k = len(traces) - 1
+
+        def traced(*a):
+            traces[k] += 1
+            return body(*a)
+        return orig(state, cond, traced, *args, **kw)
+
+    monkeypatch.setattr(dr, "while_loop", counting)
+    fn()
+    return traces
+
+
+def _cornell(**changes):
+    d = pbr.cornell_box(8, 1)
+    d.update(changes)
+    return d
+
+
+@pytest.mark.parametrize("sampler", sorted(SAMPLERS))
+def test_path_loop_traced_once_with_every_sampler(monkeypatch, sampler):
+    d = _cornell()
+    d["sensor"]["sampler"] = {"type": sampler, "sample_count": 4}
+    scene = pbr.load_dict(d)
+    traces = _body_traces(monkeypatch, "path", lambda: np.asarray(pbr.render(scene, seed=1)))
+    assert traces == [1]
+
+
+def test_path_loop_traced_once_with_unjittered_strata(monkeypatch):
+    d = _cornell()
+    d["sensor"]["sampler"] = {"type": "stratified", "sample_count": 4, "jitter": False}
+    scene = pbr.load_dict(d)
+    assert _body_traces(monkeypatch, "path", lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
+
+
+def test_path_loop_traced_once_with_refraction_and_dispersion(monkeypatch):
+    for ior in (1.5, "glass-BK7"):
+        d = pbr.scenes.glass_caustic(8, 1)
+        d["glass"]["bsdf"] = {"type": "dielectric", "int_ior": ior}
+        d["integrator"] = {"type": "path", "max_depth": 6}
+        scene = pbr.load_dict(d)
+        assert scene.bsdfs.refracts and scene.bsdfs.dispersive == (ior != 1.5)
+        assert _body_traces(monkeypatch, "path", lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
+
+
+def test_path_loops_of_derivatives_traced_once(monkeypatch):
+    """Forward mode: a primal and a forward replay; reverse mode: a primal and a
+    backward replay per render_backward (and the primal image): each loop traced once."""
+    for mode in ("forward", "backward"):
+        scene = pbr.load_dict(_cornell(integrator={"type": "prb", "max_depth": 4}))
+        params = pbr.traverse(scene)
+        key = "red.reflectance.value"
+        dr.enable_grad(params[key])
+        params.update()
+
+        def run():
+            img = pbr.render(scene, params, seed=1)
+            if mode == "forward":
+                dr.forward(params[key])
+                np.asarray(dr.grad(img))
+            else:
+                dr.backward(dr.mean(img, axis=None))
+                np.asarray(dr.grad(params[key]))
+        traces = _body_traces(monkeypatch, "path", run)
+        assert len(traces) >= 2 and set(traces) == {1}, (mode, traces)
+        monkeypatch.undo()
+
+
+@pytest.mark.parametrize("integrator", ["volpath", "simplevolpath"])
+def test_volpath_loops_traced_once(monkeypatch, integrator):
+    """On a scene with a medium (without media, the medium index, and volpath's spectral
+    MIS ratio r_u, stay constant, and the loop is still traced twice)."""
+    d = _cornell(integrator={"type": integrator, "max_depth": 5})
+    d["fog"] = {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": 0.3, "bsdf": {"type": "null"},
+                "interior": {"type": "homogeneous", "sigma_t": 2.0, "albedo": 0.8}}
+    scene = pbr.load_dict(d)
+    assert _body_traces(monkeypatch, integrator, lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
+
+
+@pytest.mark.parametrize("integrator", [{"type": "simplepath"}, {"type": "simplepath", "samplelights": False},
+                                        {"type": "simplepath", "samplebsdf": False}, {"type": "randomwalk"},
+                                        {"type": "ptracer", "max_depth": 6}])
+@pytest.mark.parametrize("ior", [1.5, "glass-BK7"])
+def test_simplepath_randomwalk_ptracer_loops_traced_once(monkeypatch, integrator, ior):
+    d = pbr.scenes.glass_caustic(8, 1)
+    d["glass"]["bsdf"] = {"type": "dielectric", "int_ior": ior}
+    d["integrator"] = integrator
+    scene = pbr.load_dict(d)
+    traces = _body_traces(monkeypatch, integrator["type"], lambda: np.asarray(pbr.render(scene, seed=1)))
+    assert traces == [1]
