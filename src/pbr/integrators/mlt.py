@@ -32,6 +32,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .. import memory
 from .. import spectrum as spec
 from ..backend import Struct
 from ..samplers import IndependentSampler, seed_array
@@ -182,6 +183,7 @@ class MLTIntegrator(SamplingIntegrator):
 
     needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
     name = "mlt"
+    bytes_per_lane = 112          # the float64 splat film and its development, per pixel (pbr.memory)
     supports_films = False        # develops its own channels (RGB films only)
     traces_light_paths = True
     light_sampler_type = "power"    # next-event estimation, as bdpt
@@ -272,6 +274,7 @@ class MLTIntegrator(SamplingIntegrator):
         self.prepare(scene, sensor)
         camera = scene.sensors[sensor]
         w, h = camera.film.size
+        memory.check_render(w, h, 1, 4, f"sensor {sensor}", self.bytes_per_lane)
         film = SplatFilm(camera, self.counter())
         if self.max_depth == 0 or not len(scene.lights):
             return mi.TensorXf(np.zeros((h, w, 3), np.float32))
