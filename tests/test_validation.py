@@ -310,6 +310,16 @@ def test_projective_boundary_nonfinite_estimates_are_counted():
     assert any(re.match(r"pbr.render \(forward derivative\): \d+ samples? w", m) for m in msgs), msgs
 
 
+def test_radiosity_stops_at_a_non_finite_residual():
+    """An overflowing emitter makes the radiosities NaN: the solver stops at once (it ran
+    all 10000 iterations, 40 s, with residual nan) and the render reports the samples."""
+    scene = _overflowing_light({"type": "radiosity"})
+    with pytest.raises(FloatingPointError, match=r"^pbr.render: 90 samples"):
+        pbr.render(scene, on_nonfinite="raise", progress=False)
+    stats = scene.integrator.solution.stats
+    assert stats.iterations == 1 and not stats.converged, stats
+
+
 def test_cli_on_nonfinite(tmp_path, monkeypatch, capsys):
     from pbr import cli
 
