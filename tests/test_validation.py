@@ -205,6 +205,20 @@ def test_valid_values_still_load_and_update(updatable):
     params.update()
 
 
+def test_albedo_bitmap_outside_unit_range_warns():
+    """An albedo bitmap's texels are clipped to [0, 1] (as Mitsuba's upsampling): that is
+    said, not silent (a reflectance image of 5 rendered as 1 without a word)."""
+    d = _box()
+    d["white"] = {"type": "diffuse", "reflectance": {"type": "bitmap", "data": np.full((2, 2, 3), 5.0, np.float32)}}
+    with pytest.warns(UserWarning, match=r"scene\.white\.reflectance\.data: 12 of 12 texel values are outside "
+                                         r"\[0, 1\] and are clipped"):
+        pbr.load_dict(d)
+    d["white"]["reflectance"]["data"] = np.full((2, 2, 3), 0.5, np.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        pbr.load_dict(d)
+
+
 # ------------------------------------------------------------- non-finite samples
 
 def _overflowing_light(integrator):
