@@ -77,3 +77,12 @@ def test_non_finite_transform_names_the_problem():
            '<rotate x="1" angle="nan"/></transform></shape></scene>')
     with pytest.raises(pbr.SceneError, match=r"scene\.s\.to_world: the transform has non-finite entries \(\d+ of 16"):
         pbr.load_dict(parse_string(xml))
+
+
+def test_non_finite_matrix_entries_are_refused_where_written():
+    """A <matrix> entry that is NaN: composing transforms keeps only the affine rows, so a
+    NaN in the last row was dropped and the scene loaded as if it were 1."""
+    xml = ('<scene version="3.0.0"><shape type="sphere" id="s"><transform name="to_world">\n'
+           '<matrix value="1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 nan"/></transform></shape></scene>')
+    with pytest.raises(XMLError, match=r'<string>:2: <matrix>: attribute "value": expected finite numbers'):
+        parse_string(xml)

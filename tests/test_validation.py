@@ -205,20 +205,38 @@ def test_valid_values_still_load_and_update(updatable):
     params.update()
 
 
+def test_albedo_bitmap_outside_unit_range_warns():
+    """An albedo bitmap's texels are clipped to [0, 1] (as Mitsuba's upsampling): that is
+    said, not silent (a reflectance image of 5 rendered as 1 without a word)."""
+    d = _box()
+    d["white"] = {"type": "diffuse", "reflectance": {"type": "bitmap", "data": np.full((2, 2, 3), 5.0, np.float32)}}
+    with pytest.warns(UserWarning, match=r"scene\.white\.reflectance\.data: 12 of 12 texel values are outside "
+                                         r"\[0, 1\] and are clipped"):
+        pbr.load_dict(d)
+    d["white"]["reflectance"]["data"] = np.full((2, 2, 3), 0.5, np.float32)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", UserWarning)
+        pbr.load_dict(d)
+
+
 # ------------------------------------------------------------- non-finite samples
 
 def _overflowing_light(integrator):
     """A rectangle light filling the view whose radiance, finite in float32, overflows
     when it is upsampled (2 max(rgb) > 3.4e38): every camera sample sees inf."""
+    return pbr.load_dict(_overflowing_light_dict(integrator))
+
+
+def _overflowing_light_dict(integrator):
     T = mi.ScalarTransform4f
-    return pbr.load_dict({
+    return {
         "type": "scene", "integrator": integrator,
         "sensor": {"type": "perspective", "fov": 30.0,
                    "to_world": T().look_at(origin=[0, 0, 3], target=[0, 0, 0], up=[0, 1, 0]),
                    "film": {"type": "hdrfilm", "width": 6, "height": 5, "rfilter": {"type": "box"}},
                    "sampler": {"type": "independent", "sample_count": 3}},
         "wall": {"type": "rectangle", "to_world": T().scale(10.0), "bsdf": {"type": "diffuse"},
-                 "emitter": {"type": "area", "radiance": 3e38}}})
+                 "emitter": {"type": "area", "radiance": 3e38}}}
 
 
 def test_nonfinite_samples_are_counted_and_reported():
@@ -263,6 +281,57 @@ def test_splatted_nonfinite_contributions_are_counted():
     scene = _overflowing_light({"type": "ptracer", "max_depth": 2})
     with pytest.raises(FloatingPointError, match=r"^pbr.render: \d+ samples? w"):
         pbr.render(scene, on_nonfinite="raise")
+
+
+def test_mlt_nonfinite_path_contributions_are_counted():
+    """mlt evaluates its paths itself (bootstrap and proposals): a non-finite estimate is
+    counted, not zeroed silently; here every path overflows, and the black image comes
+    with the count instead of the 'no bootstrap path carries light' advice (before: that
+    advice alone, and on_nonfinite='raise' rendered)."""
+    scene = _overflowing_light({"type": "mlt", "max_depth": 2, "bootstrapsamples": 64, "chains": 16,
+                                "mutationsperpixel": 2})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        img = pbr.render(scene)
+    msgs = [str(w.message) for w in caught if not issubclass(w.category, ResourceWarning)]
+    assert len(msgs) == 1 and re.match(r"pbr.render: \d+ samples were NaN or infinite", msgs[0]), msgs
+    assert np.all(np.isfinite(np.asarray(img)))
+    with pytest.raises(FloatingPointError, match=r"^pbr.render: \d+ samples"):
+        pbr.render(scene, on_nonfinite="raise")
+
+
+def test_projective_boundary_nonfinite_estimates_are_counted():
+    """prb_projective's primary-visibility boundary term evaluates its own edge samples:
+    a non-finite one is counted in the derivative pass's report (it was zeroed silently).
+    Only that term runs (sppc = sppi = 0): a blocker moved in front of the overflowing
+    light."""
+    T = mi.ScalarTransform4f
+    d = _overflowing_light_dict({"type": "prb_projective", "max_depth": 2, "sppc": 0, "sppi": 0, "sppp": 4})
+    d["wall"]["to_world"] = T().translate([0, 0, -1]).scale(10.0)
+    d["blocker"] = {"type": "rectangle", "to_world": T().scale(0.3), "bsdf": {"type": "diffuse"}}
+    scene = pbr.load_dict(d)
+    params = pbr.traverse(scene)
+    t = mi.Float(0.0)
+    dr.enable_grad(t)
+    params["blocker.to_world"] = mi.Transform4f().translate(mi.Vector3f(t, 0, 0)) @ mi.Transform4f(params["blocker.to_world"])
+    params.update()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        img = pbr.render(scene, params)
+        dr.forward(t)
+        dr.eval(dr.grad(img))
+    msgs = [str(w.message) for w in caught if issubclass(w.category, RuntimeWarning)]
+    assert any(re.match(r"pbr.render \(forward derivative\): \d+ samples? w", m) for m in msgs), msgs
+
+
+def test_radiosity_stops_at_a_non_finite_residual():
+    """An overflowing emitter makes the radiosities NaN: the solver stops at once (it ran
+    all 10000 iterations, 40 s, with residual nan) and the render reports the samples."""
+    scene = _overflowing_light({"type": "radiosity"})
+    with pytest.raises(FloatingPointError, match=r"^pbr.render: 90 samples"):
+        pbr.render(scene, on_nonfinite="raise", progress=False)
+    stats = scene.integrator.solution.stats
+    assert stats.iterations == 1 and not stats.converged, stats
 
 
 def test_cli_on_nonfinite(tmp_path, monkeypatch, capsys):

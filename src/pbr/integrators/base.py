@@ -138,6 +138,7 @@ class SamplingIntegrator:
     surfaces_only = False         # whether participating media are an error
     traces_light_paths = False    # whether every emitter must emit rays (sample_Le), without media
     needs_pinhole = False         # whether paths connect to the camera (a 'perspective' camera only)
+    bytes_per_lane = 0            # per-path state kept in memory between kernels (pbr.memory)
     supports_films = True         # whether non-RGB films (sensor matrix, extra channels) develop right
     # Records a function's kernels once and replays them (dr.freeze for pbr scenes): set
     # by pbr.freeze, a layer above the integrators; None where pbr.freeze is not loaded.
@@ -235,7 +236,7 @@ class SamplingIntegrator:
             per_pass = max(1, min(spp, max_samples_per_pass() // (w * h)))
             while spp % per_pass:
                 per_pass -= 1
-        memory.check_render(w, h, per_pass, 4, f"sensor {sensor}")
+        memory.check_render(w, h, per_pass, 4, f"sensor {sensor}", self.bytes_per_lane)
         textures = getattr(scene, "textures", None)
         if textures is not None and textures.needs_footprint and hasattr(cam, "approximate_dp_dxy"):
             # Procedural and MIP-mapped textures filter over this camera's pixel footprint

@@ -175,6 +175,7 @@ class BDPTIntegrator(LightTracingIntegrator):
     """
 
     name = "bdpt"
+    bytes_per_lane = 576          # the light and camera subpaths (pbr.memory)
     traces_light_paths = True
     light_sampler_type = "power"
 

@@ -32,6 +32,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .. import memory
 from .. import spectrum as spec
 from ..backend import Struct
 from ..samplers import IndependentSampler, seed_array
@@ -182,6 +183,7 @@ class MLTIntegrator(SamplingIntegrator):
 
     needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
     name = "mlt"
+    bytes_per_lane = 112          # the float64 splat film and its development, per pixel (pbr.memory)
     supports_films = False        # develops its own channels (RGB films only)
     traces_light_paths = True
     light_sampler_type = "power"    # next-event estimation, as bdpt
@@ -214,7 +216,8 @@ class MLTIntegrator(SamplingIntegrator):
         """(XYZ, film position, c) of the path that each lane's primary sample gives
         (``samples``: dimension-major, ``dr.width(depth)`` lanes; ``depth``: bounces):
         one BDPT strategy's MIS-weighted estimate times the number of strategies of that
-        depth; c is its luminance Y (0 where the estimate is not finite)."""
+        depth; c is its luminance Y (0 where the estimate is not finite: such lanes are
+        counted for ``on_nonfinite``)."""
         n = dr.width(depth)
         cam_dims, _ = self.dims
         cam_rng = PrimarySampleStream.at(samples, n, 0)
@@ -233,8 +236,8 @@ class MLTIntegrator(SamplingIntegrator):
                                          strategies)
         xyz = (spec.to_xyz(L, wl) + t1.xyz()) * mi.Float(n_strategies)
         pos = dr.select(t == 1, t1.pos(), pos)
-        ok = dr.all(dr.isfinite(xyz)) & (xyz.y > 0)
-        xyz = dr.select(ok, xyz, 0.0)
+        xyz, = self.counter().replace([xyz])        # non-finite estimates: counted, then 0
+        xyz = dr.select(xyz.y > 0, xyz, 0.0)
         return xyz, pos, xyz.y
 
     # -- rendering -------------------------------------------------------------------------
@@ -271,6 +274,7 @@ class MLTIntegrator(SamplingIntegrator):
         self.prepare(scene, sensor)
         camera = scene.sensors[sensor]
         w, h = camera.film.size
+        memory.check_render(w, h, 1, 4, f"sensor {sensor}", self.bytes_per_lane)
         film = SplatFilm(camera, self.counter())
         if self.max_depth == 0 or not len(scene.lights):
             return mi.TensorXf(np.zeros((h, w, 3), np.float32))
@@ -280,8 +284,9 @@ class MLTIntegrator(SamplingIntegrator):
         c_boot = self.bootstrap(scene, sensor, seed)
         b = self.normalization(c_boot)
         if not b > 0:
-            warnings.warn(f"mlt: none of the {c_boot.size} bootstrap paths carries light: black image "
-                          "(raise 'bootstrapsamples' if the scene is lit)")
+            if not int(self.counter().count[0]):     # else overflow, not darkness: pbr.render reports it
+                warnings.warn(f"mlt: none of the {c_boot.size} bootstrap paths carries light: black image "
+                              "(raise 'bootstrapsamples' if the scene is lit)")
             return mi.TensorXf(np.zeros((h, w, 3), np.float32))
 
         total = w * h * mpp

@@ -486,8 +486,9 @@ class ProjectivePathIntegrator(PathIntegrator):
             finally:
                 self.face_first_hit = False
             xyz = spec.to_xyz(L[0] - L[1], wl) * weight
-            ok &= dr.all(dr.isfinite(xyz))
-            xyz = dr.select(ok, xyz, 0.0)
+            finite = dr.all(dr.isfinite(xyz))
+            xyz, = self.counter().replace([xyz], ok)       # non-finite estimates: counted, then 0
+            ok &= finite
             R = int(math.ceil(rf.radius - 0.5))
             base = mi.Int32(dr.floor(x.x)), mi.Int32(dr.floor(x.y))
             taps = []

@@ -39,6 +39,7 @@ class ParticleTracerIntegrator(SamplingIntegrator):
 
     needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
     name = "ptracer"
+    bytes_per_lane = 48           # the light path and its camera connection (pbr.memory)
     traces_light_paths = True
 
     def __init__(self, props):

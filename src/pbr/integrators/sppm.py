@@ -12,6 +12,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .. import memory
 from .. import spectrum as spec
 from ..bsdfs import DIFFUSE, NO_BACK, ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
@@ -111,6 +112,7 @@ class SPPMIntegrator(SamplingIntegrator):
     pass_separable = False    # pixel statistics carry over between iterations
 
     name = "sppm"
+    bytes_per_lane = 416          # visible points and pixel statistics, photons (pbr.memory)
     supports_films = False        # develops its own channels (RGB films only)
     traces_light_paths = True
     GAMMA = 2.0 / 3.0      # fraction of new photons kept per iteration (Hachisuka & Jensen)
@@ -162,6 +164,7 @@ class SPPMIntegrator(SamplingIntegrator):
         n_pix = w * h
         iters = int(spp) if spp else (self.iterations or cam.sampler.sample_count)
         n_photons = n_pix if self.photons < 0 else self.photons
+        memory.check_render(w, h, 1, 4, f"sensor {sensor}", self.bytes_per_lane, max(n_pix, n_photons))
         seed = (int(seed) + 0x9E3779B9 * self.seed) & 0xFFFFFFFF
         r0 = self.initial_radius(scene, w, h)
         state = PixelState(n_pix, r0)

@@ -34,7 +34,8 @@ def sobol_matrices() -> np.ndarray:
     follows the Bratley-Fox recurrence of its primitive polynomial x^s + a_1 x^(s-1) +
     ... + a_(s-1) x + 1 over its initial direction integers m_1..m_s:
     m_k = 2 a_1 m_(k-1) ^ 4 a_2 m_(k-2) ^ ... ^ 2^s m_(k-s) ^ m_(k-s)."""
-    rows = [list(map(int, line.split())) for line in open(_DATA) if line.strip() and not line.startswith("#")]
+    with open(_DATA) as f:
+        rows = [list(map(int, line.split())) for line in f if line.strip() and not line.startswith("#")]
     out = np.zeros((SOBOL_DIMENSIONS, SOBOL_BITS), np.uint64)
     for d, (poly, *m_init) in enumerate(rows[:SOBOL_DIMENSIONS]):
         if d == 0:

@@ -559,6 +559,10 @@ class _Parser:
         if op.tag == "matrix":
             a = self.attrs(op, required=("value",))
             v = self.floats(op, "value", a["value"], (9, 16))
+            if not np.all(np.isfinite(v)):
+                # Checked here: a composed transform keeps only the affine rows, so a NaN in
+                # the last row would be dropped silently.
+                raise self.err(op, f'attribute "value": expected finite numbers, got "{a["value"]}"')
             if len(v) == 9:
                 m = np.eye(4)
                 m[:3, :3] = np.array(v).reshape(3, 3)

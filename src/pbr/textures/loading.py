@@ -18,6 +18,7 @@ finite, and e.g. an albedo in [0, 1], radiance >= 0); the texture keeps the rang
 from __future__ import annotations
 
 import os
+import warnings
 
 import mitsuba as mi
 import numpy as np
@@ -106,6 +107,10 @@ def _check_texture(tex, valid: Range, path: str) -> None:
         tex.valid = {"data": valid}
         data = np.asarray(tex.raw_values if tex.raw_values is not None else tex.params["data"])
         (FINITE if tex.form == "albedo" else valid).check(data, f"{path}.data")
+        outside = int(np.count_nonzero((data < 0) | (data > 1))) if tex.form == "albedo" else 0
+        if outside:     # Mitsuba warns the same ("contains pixels that exceed the [0, 1] range")
+            warnings.warn(f"{path}.data: {outside} of {data.size} texel values are outside [0, 1] and are "
+                          f"clipped to it (an albedo)", stacklevel=2)
         return
     if isinstance(tex, MeshAttribute):
         tex.valid = {"scale": valid.factor()}

@@ -93,6 +93,8 @@ def _iterate(st: SolveStats, step, tolerance, max_iterations, progress) -> None:
         if r <= tolerance:
             st.converged = True
             break
+        if not np.isfinite(r):      # NaN/inf radiosities: more iterations cannot help
+            break                   # (not converged; the render counts the samples)
     bar.close()
 
 
