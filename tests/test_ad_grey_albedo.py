@@ -158,33 +158,33 @@ def test_roughness_below_its_floor_has_the_floors_derivative():
     assert np.array_equal(below, at_floor)
 
 
-@pytest.mark.xfail(strict=True, reason="known defect: d/d alpha of a near-specular rough conductor is "
-                   "systematically wrong for alpha below ~5e-4 (found in the issue 18 audit)")
-@pytest.mark.parametrize("alpha", [1e-4, 1.5e-4])
+@pytest.mark.parametrize("alpha", [1.5e-4, 3e-4])
 def test_roughness_derivative_near_specular_matches_finite_differences(alpha):
-    """d mean(image) / d alpha at tiny roughness, reverse mode against central differences
-    (+-20%; measured 256 spp, 3 seeds: alpha 1e-4 -1458/-1511/-1506 against -1.07;
-    1.5e-4 -553/-514/-564 against 0.70; 3e-4 +113/+89/+105 against 2.09; at 1e-3 the
-    derivative is noise of +-4 around the differences' -0.01). The values are consistent
-    across seeds, so this is a bias, not noise, and no clamp is involved above 1e-4."""
+    """d mean(image) / d alpha of a near-specular Beckmann conductor, reverse mode (4 seeds)
+    against central differences (+-20%, common random numbers). It was biased: -553/-514/-564
+    at alpha 1.5e-4 and +113/+89/+105 at 3e-4 against differences of 0.70 and 2.09 (the
+    Beckmann visible-normal sampler's quantised sin(theta); see test_microfacet's
+    test_tiny_roughness_sampling_matches_pdf_score). Tolerance: 4 standard errors of the
+    seeds' mean plus 2 for the differences' own noise."""
     scene = pbr.load_dict(grad_scenes.metal_floor(alpha=alpha, res=8))
     params = pbr.traverse(scene)
     key = "floor.bsdf.alpha.value"
     rev = []
-    for s in range(2):
+    for s in range(4):
         params[key] = mi.Float(alpha)
         dr.enable_grad(params[key])
         params.update()
-        img = pbr.render(scene, params, spp=256, seed=s, seed_grad=s + 100)
+        img = pbr.render(scene, params, spp=1024, seed=s, seed_grad=s + 100)
         dr.backward(dr.mean(img, axis=None))
         rev.append(float(np.asarray(dr.grad(params[key])).ravel()[0]))
     ends = []
     for v in (1.2 * alpha, 0.8 * alpha):
         params[key] = mi.Float(v)
         params.update()
-        ends.append(float(np.asarray(pbr.render(scene, spp=256, seed=0)).mean()))
+        ends.append(float(np.asarray(pbr.render(scene, spp=1024, seed=0)).mean()))
     fd = (ends[0] - ends[1]) / (0.4 * alpha)
-    assert abs(np.mean(rev) - fd) < 10.0, (rev, fd)
+    se = np.std(rev, ddof=1) / 2.0
+    assert abs(np.mean(rev) - fd) < 4.0 * se + 2.0, (rev, fd)
 
 
 def test_black_emission_has_a_derivative():

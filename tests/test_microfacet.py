@@ -82,3 +82,28 @@ def test_wrong_pdf_is_rejected():
     test = ChiSquareTest(domain=SphericalDomain(), sample_func=lambda s: md.sample(wi, s)[0],
                          pdf_func=lambda m: wrong.pdf(wi, m), sample_dim=2, sample_count=200_000, res=101)
     assert not test.run()
+
+
+@pytest.mark.parametrize("kind", ["ggx", "beckmann"])
+@pytest.mark.parametrize("theta", [0.6, 1.2])
+def test_tiny_roughness_sampling_matches_pdf_score(kind, theta):
+    """At near-specular roughness (where a chi-square test cannot resolve the lobe), the
+    sampled normals follow the pdf: the score E[d log pdf / d alpha] is 0 for any
+    distribution that is sampled exactly (the pdf integrates to 1 for every alpha).
+    alpha * E over 2^20 samples has a standard error of ~2e-3. Beckmann's visible normals
+    took sin(theta) of the stretched direction as sqrt(1 - cos^2), quantised for tiny
+    alpha: alpha * E was -0.89 at alpha 1e-4 (theta 1.2), +0.50 at 1.5e-4, +0.62 at 1e-3
+    (theta 0.6), which biased every roughness gradient of a near-specular Beckmann BSDF."""
+    n = 1 << 20
+    rng = np.random.default_rng(7)
+    u = mi.Point2f(mi.Float(rng.random(n).astype(np.float32)), mi.Float(rng.random(n).astype(np.float32)))
+    wi = mi.Vector3f(math.sin(theta), 0.0, math.cos(theta))
+    for alpha in (1e-4, 1.5e-4, 3e-4, 1e-3, 1e-2):
+        a = mi.Float(alpha)
+        dr.enable_grad(a)
+        mf = Microfacet(kind, a, a, sample_visible=True)
+        with dr.suspend_grad():
+            m, _ = mf.sample(wi, u)
+        p = mf.pdf(wi, m)
+        dr.backward(dr.mean(p / dr.detach(p)))
+        assert abs(alpha * dr.grad(a)[0]) < 0.02, (kind, theta, alpha, dr.grad(a)[0])
