@@ -83,7 +83,8 @@ def _iterate(st: SolveStats, step, tolerance, max_iterations, progress) -> None:
     residuals in ``st`` and reporting them to ``progress``."""
     bar = _Progress(st.solver, progress)
     for it in range(1, max_iterations + 1):
-        r = step(it)
+        with np.errstate(invalid="ignore", over="ignore"):   # non-finite: detected below
+            r = step(it)
         if r is None:
             st.converged = True
             break
