@@ -72,19 +72,23 @@ class HDRFilm:
         props.finish()
 
     def _size(self, props: Props) -> None:
-        self.width = props.int("width", 768, min=1)
-        self.height = props.int("height", 576, min=1)
+        self._window(props)
         self.pixel_format = props.string("pixel_format", "rgb", choices=("rgb",))
         props.string("component_format", "float32", choices=("float16", "float32"))
         props.string("file_format", "openexr", choices=("openexr", "exr"))
+        if props.bool("sample_border", False):
+            raise props.error("sample_border", "sample_border=true is not supported")
+
+    def _window(self, props: Props) -> None:
+        """Mitsuba's ``width``/``height`` and crop window (which must lie inside the film)."""
+        self.width = props.int("width", 768, min=1)
+        self.height = props.int("height", 576, min=1)
         self.crop_offset = (props.int("crop_offset_x", 0, min=0), props.int("crop_offset_y", 0, min=0))
         self.crop_size = (props.int("crop_width", self.width, min=1), props.int("crop_height", self.height, min=1))
         for k, o, c, n in (("crop_width", self.crop_offset[0], self.crop_size[0], self.width),
                            ("crop_height", self.crop_offset[1], self.crop_size[1], self.height)):
             if o + c > n:
                 raise props.error(k, f"the crop window (offset {o} + size {c}) exceeds the film's {n} pixels")
-        if props.bool("sample_border", False):
-            raise props.error("sample_border", "sample_border=true is not supported")
 
     def _reconstruction_filter(self, props: Props) -> None:
         self.rfilter = GaussianFilter(Props({"type": "gaussian"}, props.key("rfilter")))
@@ -448,17 +452,10 @@ class SpecFilm(HDRFilm):
     name = "specfilm"
 
     def __init__(self, props: Props):
-        self.width = props.int("width", 768, min=1)
-        self.height = props.int("height", 576, min=1)
+        self._window(props)
         self.pixel_format = "spectral"
         props.string("component_format", "float16", choices=("float16", "float32", "uint32"))
         props.mark("compensate")
-        self.crop_offset = (props.int("crop_offset_x", 0, min=0), props.int("crop_offset_y", 0, min=0))
-        self.crop_size = (props.int("crop_width", self.width, min=1), props.int("crop_height", self.height, min=1))
-        for k, o, c, n in (("crop_width", self.crop_offset[0], self.crop_size[0], self.width),
-                           ("crop_height", self.crop_offset[1], self.crop_size[1], self.height)):
-            if o + c > n:
-                raise props.error(k, f"the crop window (offset {o} + size {c}) exceeds the film's {n} pixels")
         self.rfilter = GaussianFilter(Props({"type": "gaussian"}, props.key("rfilter")))
         self.srf_names, tables = [], []
         for key, child in props.children():
