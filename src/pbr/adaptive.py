@@ -29,7 +29,6 @@ error of the image (from the image's own samples), its sample count, and the tim
 
 from __future__ import annotations
 
-import contextlib
 import math
 import time
 
@@ -234,14 +233,6 @@ def _dilate(a):
     return np.max([p[i:i + h, j:j + w] for i in range(3) for j in range(3)], axis=0)
 
 
-@contextlib.contextmanager
 def adaptive_render(integrator, plan: Adaptive):
     """Within the block, ``integrator``'s film is ``plan``'s."""
-    if not integrator.pass_separable:
-        raise NotImplementedError(f"{integrator.path}: the {integrator.name!r} integrator does not render "
-                                  f"independent camera-sample passes, so it cannot sample adaptively")
-    integrator.adaptive = plan
-    try:
-        yield plan
-    finally:
-        integrator.adaptive = None
+    return integrator.passes_planned_by("adaptive", plan, "it cannot sample adaptively")

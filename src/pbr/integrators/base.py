@@ -200,17 +200,23 @@ class SamplingIntegrator:
             if len(scene.media):
                 raise SceneError(f"{self.path}: the {self.name} integrator does not support participating media")
 
-    @contextlib.contextmanager
     def pass_job(self, job: PassJob):
         """Within the block, ``render`` does ``job`` (a part of the render; see PassJob)."""
+        return self.passes_planned_by("job", job, "its passes cannot be rendered apart")
+
+    @contextlib.contextmanager
+    def passes_planned_by(self, attr: str, plan, refusal: str):
+        """Within the block, attribute ``attr`` holds ``plan`` (a PassJob or an adaptive
+        plan), which decides ``render``'s passes; integrators whose passes are not
+        independent camera samples refuse, saying ``refusal``."""
         if not self.pass_separable:
             raise NotImplementedError(f"{self.path}: the {self.name!r} integrator does not render independent "
-                                      f"camera-sample passes, so its passes cannot be rendered apart")
-        self.job = job
+                                      f"camera-sample passes, so {refusal}")
+        setattr(self, attr, plan)
         try:
-            yield job
+            yield plan
         finally:
-            self.job = None
+            setattr(self, attr, None)
 
     def counter(self) -> NonFinite:
         """The non-finite sample counter of the current render (made on first use)."""
