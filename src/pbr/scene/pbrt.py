@@ -45,6 +45,7 @@ from ..films import FILMS, camera_sensors
 from ..filters import FILTERS
 from ..integrators import INTEGRATORS
 from ..lights import LIGHT_TYPES
+from ..lights.goniometric import equal_area_sphere_to_square
 from ..media.mediumset import MEDIUM_TYPES
 from ..spectrum import CIE_Y_INTEGRAL, LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, blackbody, cie_tables_np, xyz_to_srgb
 from ..textures import TEXTURE_TYPES
@@ -1937,19 +1938,8 @@ def equal_area_to_latlong(img: np.ndarray, height: int | None = None) -> np.ndar
     # +y-up frame, then in pbrt's light space (+z up; the caller's frame maps one to the other).
     mx, my, mz = np.sin(th) * np.sin(ph), np.cos(th), -np.sin(th) * np.cos(ph)
     px, py, pz = mx, -mz, my
-    # Clarberg's equal-area sphere -> square (pbrt-v4's EqualAreaSphereToSquare).
-    ax, ay, az = np.abs(px), np.abs(py), np.abs(pz)
-    rr = np.sqrt(np.clip(1 - az, 0, None))
-    a, b = np.maximum(ax, ay), np.minimum(ax, ay)
-    b = np.where(a == 0, 0, b / np.where(a == 0, 1, a))
-    phi_ = np.arctan(b) * 2 / math.pi
-    phi_ = np.where(ax < ay, 1 - phi_, phi_)
-    v = phi_ * rr
-    u = rr - v
-    neg = pz < 0
-    u, v = np.where(neg, 1 - v, u), np.where(neg, 1 - u, v)
-    u, v = np.copysign(u, px), np.copysign(v, py)
-    s, t = (u + 1) / 2, (v + 1) / 2
+    st = equal_area_sphere_to_square(np.stack([px, py, pz], axis=-1))
+    s, t = st[..., 0], st[..., 1]
     xi = np.clip((s * n).astype(int), 0, n - 1)
     yi = np.clip((t * n).astype(int), 0, n - 1)
     return img[yi, xi]
