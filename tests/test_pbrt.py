@@ -236,6 +236,23 @@ def test_approximate_notes_instead_of_errors(tmp_path):
 
 # -- conventions, defaults and units against independent values ------------------------------------
 
+
+def flat_view(res: int, spp: int, look: str = "0 0 1  0 0 0  0 1 0", camera: str = "") -> str:
+    """The head of the small orthographic test scenes, up to WorldBegin: a res x res image,
+    spp samples, box filter, direct light only. pbrt's LookAt from +z shows world +x on the
+    image's left (its camera space is left-handed); "Scale -1 1 1" first, as exported
+    scenes do, puts it on the right."""
+    return f"""
+Scale -1 1 1
+LookAt {look}
+Camera "orthographic"{camera}
+Film "rgb" "integer xresolution" {res} "integer yresolution" {res}
+Sampler "independent" "integer pixelsamples" {spp}
+Integrator "path" "integer maxdepth" 1
+PixelFilter "box"
+WorldBegin
+"""
+
 def render_mean(path, **kw):
     scene = pbr.load_file(path, **kw)
     return np.asarray(pbr.render(scene, seed=3), dtype=np.float64)
@@ -554,25 +571,12 @@ def test_imagemap_conventions(tmp_path):
     img = np.zeros((2, 2, 3), dtype=np.float32)
     img[1, 0] = 1.0                   # row 1 is the bottom row of the image
     mi.Bitmap(img).write(str(tmp_path / "tex.exr"))
-    # pbrt's LookAt from +z shows world +x on the image's left (its camera space is
-    # left-handed); "Scale -1 1 1" first, as exported scenes do, puts it on the right.
-    scene = """
-Scale -1 1 1
-LookAt 0 0 1  0 0 0  0 1 0
-Camera "orthographic"
-Film "rgb" "integer xresolution" 8 "integer yresolution" 8
-Sampler "independent" "integer pixelsamples" 4
-Integrator "path" "integer maxdepth" 1
-PixelFilter "box"
-WorldBegin
+    # The texture is read through a quad lit by a distant light (radiance = albedo).
+    scene = flat_view(8, 4) + """LightSource "distant" "point3 from" [0 0 1] "point3 to" [0 0 0] "rgb L" [3.14159265 3.14159265 3.14159265]
 Texture "t" "spectrum" "imagemap" "string filename" "tex.exr" "string filter" "point" {extra}
-AreaLightSource "diffuse" "rgb L" [1 1 1]
 Material "diffuse" "texture reflectance" "t"
 Shape "trianglemesh" "point3 P" [-1 -1 0 1 -1 0 1 1 0 -1 1 0] "integer indices" [0 1 2 0 2 3] "point2 uv" [0 0 1 0 1 1 0 1]
 """
-    # The quad emits L = 1 and reflects nothing: the texture is read through a lit floor instead.
-    scene = scene.replace('AreaLightSource "diffuse" "rgb L" [1 1 1]\n', "").replace(
-        "WorldBegin\n", 'WorldBegin\nLightSource "distant" "point3 from" [0 0 1] "point3 to" [0 0 0] "rgb L" [3.14159265 3.14159265 3.14159265]\n')
     out = []
     for extra in ("", '"bool invert" true'):
         path = write(tmp_path, scene.format(extra=extra), f"img{len(out)}.pbrt")
@@ -594,16 +598,7 @@ def test_checkerboard_conventions(tmp_path):
     is box-filtered over the pixel footprint: pixels next to a square's edge are blurred,
     so the quarters' inner pixels are compared; with mitsuba=True (Mitsuba's unfiltered
     checkerboard, to_uv scaled by 1/2) the whole quarters."""
-    text = """
-Scale -1 1 1
-LookAt 0 0 1  0 0 0  0 1 0
-Camera "orthographic"
-Film "rgb" "integer xresolution" 8 "integer yresolution" 8
-Sampler "independent" "integer pixelsamples" 4
-Integrator "path" "integer maxdepth" 1
-PixelFilter "box"
-WorldBegin
-LightSource "distant" "point3 from" [0 0 1] "point3 to" [0 0 0] "rgb L" [3.14159265 3.14159265 3.14159265]
+    text = flat_view(8, 4) + """LightSource "distant" "point3 from" [0 0 1] "point3 to" [0 0 0] "rgb L" [3.14159265 3.14159265 3.14159265]
 Texture "c" "spectrum" "checkerboard" "float uscale" 2 "float vscale" 2 "rgb tex1" [1 1 1] "rgb tex2" [0.2 0.2 0.2]
 Material "diffuse" "texture reflectance" "c"
 Shape "trianglemesh" "point3 P" [-1 -1 0 1 -1 0 1 1 0 -1 1 0] "integer indices" [0 1 2 0 2 3] "point2 uv" [0 0 1 0 1 1 0 1]
@@ -624,16 +619,7 @@ def test_spot_light_axis_and_intensity(tmp_path):
     """A spot light from (0, 0, 2) to the origin: on its axis the intensity is I scale
     (RGB of unit luminance), so the diffuse plane (albedo 0.5) at distance 2 shows
     0.5 / pi * I / 4; outside the cone (a point 2 units aside: 45 degrees) it is dark."""
-    path = write(tmp_path, """
-Scale -1 1 1
-LookAt 0 0 6  0 0 0  0 1 0
-Camera "orthographic"
-Film "rgb" "integer xresolution" 9 "integer yresolution" 9
-Sampler "independent" "integer pixelsamples" 16
-Integrator "path" "integer maxdepth" 1
-PixelFilter "box"
-WorldBegin
-LightSource "spot" "rgb I" [1 1 1] "float scale" 8 "point3 from" [0 0 2] "point3 to" [0 0 0] "float coneangle" 20
+    path = write(tmp_path, flat_view(9, 16, look="0 0 6  0 0 0  0 1 0") + """LightSource "spot" "rgb I" [1 1 1] "float scale" 8 "point3 from" [0 0 2] "point3 to" [0 0 0] "float coneangle" 20
 Material "diffuse" "rgb reflectance" [0.5 0.5 0.5]
 Shape "trianglemesh" "point3 P" [-10 -10 0 10 -10 0 10 10 0 -10 10 0] "integer indices" [0 1 2 0 2 3]
 """)
@@ -765,16 +751,7 @@ def test_texture_space_and_3d_checkerboard(tmp_path, kind):
     """3D textures and non-UV mappings take to_world = the CTM at the Texture directive:
     a 3D checkerboard, or a 2D one over a planar mapping (s = x, t = y in texture
     space), translated by one unit swaps its colours at a point."""
-    text = """
-Scale -1 1 1
-LookAt 0.5 0.5 5  0.5 0.5 0  0 1 0
-Camera "orthographic" "float screenwindow" [-0.4 0.4 -0.4 0.4]
-Film "rgb" "integer xresolution" 4 "integer yresolution" 4
-Sampler "independent" "integer pixelsamples" 256
-Integrator "path" "integer maxdepth" 1
-PixelFilter "box"
-WorldBegin
-LightSource "distant" "point3 from" [0 0 1] "point3 to" [0 0 0] "rgb L" [3.14159265 3.14159265 3.14159265]
+    text = flat_view(4, 256, look="0.5 0.5 5  0.5 0.5 0  0 1 0", camera=' "float screenwindow" [-0.4 0.4 -0.4 0.4]') + """LightSource "distant" "point3 from" [0 0 1] "point3 to" [0 0 0] "rgb L" [3.14159265 3.14159265 3.14159265]
 AttributeBegin
 {xf}
 Texture "c" "spectrum" "checkerboard" {kind} "rgb tex1" [1 1 1] "rgb tex2" [0.2 0.2 0.2]
@@ -882,16 +859,7 @@ def test_imagemap_encoding_as_pbrt(tmp_path):
         mi.Bitmap(img).write(str(tmp_path / f"grey.{ext}"))
     vals = []
     for ext in ("png", "jpg"):
-        path = write(tmp_path, f"""
-Scale -1 1 1
-LookAt 0 0 1  0 0 0  0 1 0
-Camera "orthographic"
-Film "rgb" "integer xresolution" 4 "integer yresolution" 4
-Sampler "independent" "integer pixelsamples" 64
-Integrator "path" "integer maxdepth" 1
-PixelFilter "box"
-WorldBegin
-LightSource "distant" "point3 from" [0 0 1] "point3 to" [0 0 0] "rgb L" [3.14159265 3.14159265 3.14159265]
+        path = write(tmp_path, flat_view(4, 64) + f"""LightSource "distant" "point3 from" [0 0 1] "point3 to" [0 0 0] "rgb L" [3.14159265 3.14159265 3.14159265]
 Texture "t" "float" "imagemap" "string filename" "grey.{ext}" "string encoding" "linear"
 Material "diffuse" "texture reflectance" "t"
 Shape "trianglemesh" "point3 P" [-1 -1 0 1 -1 0 1 1 0 -1 1 0] "integer indices" [0 1 2 0 2 3] "point2 uv" [0 0 1 0 1 1 0 1]
