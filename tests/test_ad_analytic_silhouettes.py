@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import pbr
-from test_ad_geometry import Z_MAX, _CameraMover, _z, ad_batches, fd_batches
+from test_ad_geometry import Z_MAX, _CameraMover, _z, ad_batches, fd_batches, glossy_reflection
 
 T = mi.ScalarTransform4f
 BLACK = {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}
@@ -310,15 +310,8 @@ def test_lit_sphere_under_an_environment_within_5_percent():
 def sphere_in_a_glossy_floor(res=16, sppi=None):
     """A black sphere above a rough metal floor under a white sky (the mesh test's
     glossy-reflection scene with a sphere for the box), prb_projective."""
-    integrator = {"type": "prb_projective", "max_depth": 3}
-    if sppi is not None:
-        integrator["sppi"] = sppi
-    return {"type": "scene", "integrator": integrator,
-            "sensor": {"type": "perspective", "fov": 45, "to_world": T().look_at([0, -3, 1.2], [0, 0, 0.3], [0, 0, 1]),
-                       "film": {"type": "hdrfilm", "width": res, "height": res}},
-            "obj": {"type": "sphere", "radius": 0.3, "center": [0, 0.6, 0.6], "bsdf": BLACK},
-            "floor": {"type": "rectangle", "to_world": T().scale(3), "bsdf": {"type": "roughconductor", "alpha": 0.15}},
-            "sky": {"type": "constant", "radiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}}
+    return glossy_reflection(res, sppi, occluder={
+        "obj": {"type": "sphere", "radius": 0.3, "center": [0, 0.6, 0.6], "bsdf": BLACK}})
 
 
 @pytest.mark.slow

@@ -503,17 +503,20 @@ def test_first_hit_term_forward_equals_reverse(occluder_obj):
     assert abs(rev) > 0.1 and abs(fwd - rev) < 1e-3 * abs(rev), (fwd, rev)
 
 
-def glossy_reflection(res=RES, sppi=None):
-    """A black box (Mitsuba's cube) standing on a rough metal floor under a white sky,
-    turned about the vertical: seen directly and in the floor's glossy reflection."""
+def glossy_reflection(res=RES, sppi=None, occluder=None):
+    """A black box (Mitsuba's cube; or ``occluder``, a dict ``{key: shape}``) standing on a
+    rough metal floor under a white sky, turned about the vertical: seen directly and in
+    the floor's glossy reflection."""
     integrator = {"type": "prb_projective", "max_depth": 3}
     if sppi is not None:
         integrator["sppi"] = sppi
+    if occluder is None:
+        occluder = {"box": {"type": "cube", "to_world": T().translate([0, 0.6, 0.6]).rotate([0, 0, 1], 20).scale(0.3),
+                            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}}}
     return {"type": "scene", "integrator": integrator,
             "sensor": {"type": "perspective", "fov": 45, "to_world": T().look_at([0, -3, 1.2], [0, 0, 0.3], [0, 0, 1]),
                        "film": {"type": "hdrfilm", "width": res, "height": res}},
-            "box": {"type": "cube", "to_world": T().translate([0, 0.6, 0.6]).rotate([0, 0, 1], 20).scale(0.3),
-                    "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.0, 0.0, 0.0]}}},
+            **occluder,
             "floor": {"type": "rectangle", "to_world": T().scale(3), "bsdf": {"type": "roughconductor", "alpha": 0.15}},
             "sky": {"type": "constant", "radiance": {"type": "rgb", "value": [1.0, 1.0, 1.0]}}}
 
