@@ -8,16 +8,14 @@ check fails (the error is then the scenes' difference, which more samples do not
 """
 
 import csv
-import importlib.util
 import shutil
-from pathlib import Path
 
 import pytest
 
 import pbr  # first: it chooses libLLVM before Dr.Jit loads
 from pbr.plotting import pyplot
+from scripts import load_script
 
-ROOT = Path(__file__).resolve().parent.parent
 ARGS = ["--quick", "--res", "16", "--budgets", "4,64", "--ref-spp", "4096", "--max-time", "1.0", "--min-budgets", "1",
         "--scenes", "cornell,indirect"]
 
@@ -36,10 +34,7 @@ SCENES = ("cornell", "indirect")     # every integrator runs on these
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_integrators", ROOT / "benchmarks" / "bench_integrators.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("benchmarks/bench_integrators.py")
 
 
 @pytest.fixture(scope="module")

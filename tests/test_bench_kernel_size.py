@@ -7,21 +7,18 @@ Must fail: with the spheres placed inside the box (``FAR`` = 0, radius 0.1) the 
 fails; with ``with_all_bsdfs`` adding nothing the kernel-size check fails (both tried).
 """
 
-import importlib.util
 import sys
 from pathlib import Path
 
 import pbr  # first: it chooses libLLVM before Dr.Jit loads
+from scripts import load_script
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 def _bench():
     sys.path.insert(0, str(ROOT / "benchmarks"))
-    spec = importlib.util.spec_from_file_location("bench_kernel_size", ROOT / "benchmarks" / "bench_kernel_size.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("benchmarks/bench_kernel_size.py")
 
 
 def test_unreachable_families_grow_the_kernel_not_the_image():

@@ -1,6 +1,5 @@
 """The materials gallery (every BSDF family), its data files, and the dict -> XML writer."""
 
-import importlib.util
 import os
 import xml.etree.ElementTree as ET
 
@@ -15,6 +14,7 @@ from pbr.bsdfs import BSDF_TYPES
 from pbr.bsdfs.measured import read_tensor_file
 from pbr.scene.xml import to_xml, parse_string
 from pbr.scenes import GALLERY_MATERIALS
+from scripts import load_script
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENES = os.path.join(ROOT, "scenes")
@@ -31,11 +31,7 @@ NOT_IN_MITSUBA = {
 
 def make_data():
     """scenes/data/make_gallery_data.py as a module."""
-    spec = importlib.util.spec_from_file_location("make_gallery_data", os.path.join(SCENES, "data",
-                                                                                    "make_gallery_data.py"))
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("scenes/data/make_gallery_data.py")
 
 
 def cells(d):

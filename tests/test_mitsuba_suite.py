@@ -7,27 +7,20 @@ Must fail: a biased image (20% too bright, or a checkerboard with its squares sw
 fails the criterion; 0.3% of pixels wrong fails it, 0.2% does not.
 """
 
-import importlib.util
 import math
 import os
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import pbr  # noqa: F401  (chooses libLLVM before Dr.Jit loads)
+from scripts import load_script
 
-ROOT = Path(__file__).resolve().parent.parent
 DATA = os.environ.get("PBR_MITSUBA_DATA", "")
 
 
 def _suite():
-    spec = importlib.util.spec_from_file_location("mitsuba_suite", ROOT / "benchmarks" / "mitsuba_suite.py")
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod      # its dataclasses look their module up
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("benchmarks/mitsuba_suite.py", register=True)
 
 
 suite = _suite()

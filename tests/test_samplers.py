@@ -18,6 +18,7 @@ from pbr import validate
 from pbr.plugins.props import Props
 from pbr.samplers import SAMPLERS, seed_array
 from pbr.samplers import lowdiscrepancy as ld
+from scripts import load_script
 
 LD_SAMPLERS = ["stratified", "multijitter", "orthogonal", "ldsampler", "sobol", "paddedsobol", "zsobol", "halton",
                "pmj02bn"]
@@ -466,12 +467,7 @@ def test_scene_dicts_with_samplers_round_trip_through_xml():
 def test_bench_samplers_fits_slopes_and_equal_time():
     """The benchmark's analysis on synthetic curves: relMSE = c spp^-k gives slope -k; a
     sampler twice as slow per spp is compared at half the spp."""
-    import importlib.util
-    import pathlib
-    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "bench_samplers.py"
-    spec = importlib.util.spec_from_file_location("bench_samplers", path)
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_script("benchmarks/bench_samplers.py")
     rows = []
     for sampler, c, k, t in (("independent", 1.0, 1.0, 1e-3), ("sobol", 1.0, 2.0, 2e-3)):
         for spp in (1, 4, 16, 64, 256, 1024):

@@ -2,19 +2,13 @@
 backend: a working case reports its image mean next to Mitsuba's, and a case whose child
 fails is reported with its message instead of ending the triage."""
 
-import importlib.util
-from pathlib import Path
 
 import pbr
-
-ROOT = Path(__file__).resolve().parent.parent
+from scripts import load_script
 
 
 def _triage():
-    spec = importlib.util.spec_from_file_location("triage_backend", ROOT / "benchmarks" / "triage_backend.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_script("benchmarks/triage_backend.py")
 
 
 def test_triage_reports_results_and_failures():
