@@ -107,6 +107,23 @@ def test_volpath_loops_traced_once(monkeypatch, integrator):
     assert _body_traces(monkeypatch, integrator, lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
 
 
+def test_volpath_without_media_traced_once(monkeypatch):
+    """Without media volpath's spectral MIS ratio, null-collision count and medium index
+    are constants, not loop state; its shadow rays, with nothing to cross, are one
+    occlusion test instead of a loop over surfaces (pbrt-v4 scenes use volpath by
+    default, mostly without media)."""
+    scene = pbr.load_dict(_cornell(integrator={"type": "volpath", "max_depth": 5}))
+    assert _body_traces(monkeypatch, "volpath", lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
+    monkeypatch.undo()
+    assert _body_traces(monkeypatch, "shadow_ray", lambda: np.asarray(pbr.render(scene, seed=1))) == []
+    monkeypatch.undo()
+    # A null surface is crossed by the shadow ray's loop, traced once per vertex call.
+    d = _cornell(integrator={"type": "volpath", "max_depth": 5})
+    d["pane"] = {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": 0.3, "bsdf": {"type": "null"}}
+    scene = pbr.load_dict(d)
+    assert _body_traces(monkeypatch, "volpath", lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
+
+
 @pytest.mark.parametrize("integrator", [{"type": "simplepath"}, {"type": "simplepath", "samplelights": False},
                                         {"type": "simplepath", "samplebsdf": False}, {"type": "randomwalk"},
                                         {"type": "ptracer", "max_depth": 6}])

@@ -334,7 +334,11 @@ class Geometry:
             shape = self.shape_of(si.shape, hit)
         return si, shape
 
+    def occluded(self, ray: mi.Ray3f, active):
+        """True where something is hit between ``ray.o`` and ``ray.maxt`` (no surface
+        interaction is computed)."""
+        return self.mi_scene.ray_test(ray, active)
+
     def unoccluded(self, si, p: mi.Point3f, active):
         """True where the segment from ``si`` to ``p`` is free of occluders."""
-        ray = si.spawn_ray_to(p)
-        return ~self.mi_scene.ray_test(ray, active)
+        return ~self.occluded(si.spawn_ray_to(p), active)

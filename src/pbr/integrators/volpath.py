@@ -197,18 +197,20 @@ class VolPathIntegrator(_MediumAware):
 
         ray, active, L, beta, depth, valid = path_state(ray, active)
         prev_p, prev_n, prev_pdf, prev_delta = mis_state(ray)
-        r_u = mi.Spectrum(1.0)
         r_l = mi.Spectrum(1.0)
         eta = mi.Float(1.0)
-        medium = mi.UInt32(self._medium)
         # Only what a bounce changes is loop state (see path's loop): not the wavelengths
         # nor the sample stream's constants, and the dispersion flag only with dispersion.
+        # Without media the spectral MIS ratio r_u (1), the null-collision count and the
+        # medium index (vacuum) never change: they are state (``in_media``) only with media.
         terminated = mi.Bool(False) if bsdfs.dispersive else None
-        n_null = mi.UInt32(0)
+        vacuum = (mi.Spectrum(1.0), mi.UInt32(0), mi.UInt32(self._medium))
+        in_media = vacuum if has_media else None
         rng_state = rng.loop_state()
 
-        while dr.hint(active, label="volpath", exclude=[rng, wl]):
+        while dr.hint(active, label="volpath", exclude=[rng, wl, vacuum]):
             rng.set_loop_state(rng_state)
+            r_u, n_null, medium = in_media if has_media else vacuum
             si, shape = geo.intersect(ray, active)
             hit = si.is_valid()
             t_hit = dr.select(hit, si.t, dr.inf)
@@ -278,9 +280,16 @@ class VolPathIntegrator(_MediumAware):
             if dr.hint(has_media, mode="scalar"):
                 f_em, pdf_em = volume.phase_nee(media, medium, ray, ls.wi, sc, f_em, pdf_em)
             sray, s_med = volume.shadow_ray(scene, shape, si, ls, sc, p_sc, medium, nee & rs)
-            T_ray, tr_u, tr_l, n_shadow = volume.transmittance(
-                scene, sray, ls.p, s_med, nee, (mi.Spectrum(1.0), mi.Spectrum(1.0), mi.Spectrum(1.0), mi.UInt32(0)),
-                self._shadow_segment, (media, rng, wl), wl=wl)
+            if dr.hint(has_media, mode="scalar"):
+                T_ray, tr_u, tr_l, n_shadow = volume.transmittance(
+                    scene, sray, ls.p, s_med, nee,
+                    (mi.Spectrum(1.0), mi.Spectrum(1.0), mi.Spectrum(1.0), mi.UInt32(0)),
+                    self._shadow_segment, (media, rng, wl), wl=wl)
+            else:
+                # Without media only T changes along the shadow ray (null surfaces).
+                T_ray, = volume.transmittance(scene, sray, ls.p, s_med, nee, (mi.Spectrum(1.0),),
+                                              self._shadow_segment, (media, rng, wl), wl=wl)
+                tr_u, tr_l = 1.0, 1.0
             rl_nee = r_u * ls.pdf * tr_l
             ru_nee = r_u * pdf_em * tr_u
             d_nee = dr.select(ls.delta, dr.mean(rl_nee), dr.mean(rl_nee + ru_nee))
@@ -312,6 +321,8 @@ class VolPathIntegrator(_MediumAware):
             survive = rng.next_float32() < q
             beta[rr] = beta * dr.rcp(q)
             active = skip | (cont & (~rr | survive) & (dr.max(beta) > 0))
+            if dr.hint(has_media, mode="scalar"):
+                in_media = (r_u, n_null, medium)
             rng_state = rng.loop_state()
 
         rng.set_loop_state(rng_state)

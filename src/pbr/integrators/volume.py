@@ -60,7 +60,6 @@ def free_flight(media, rng, ray, medium, t_max, wl, active, state, collide, args
     return state
 
 
-@dr.syntax
 def transmittance(scene, ray, p_light, medium, active, state, segment, args=(), wl=None, crossing=None,
                   crossing_args=()):
     """Follow a shadow ray from ``ray.o`` toward ``p_light`` through media and ``null``
@@ -73,11 +72,25 @@ def transmittance(scene, ray, p_light, medium, active, state, segment, args=(), 
     transmission, as Mitsuba's volumetric integrators treat it) are crossed too, the
     transmittance multiplied by the lobe's weight ``w``; ``crossing(state, w, lanes,
     *crossing_args)``, if given, applies it instead (``w`` then carries derivatives)."""
+    has_media = len(scene.media) > 0
+    bsdfs = scene.bsdfs
+    if not (has_media or bsdfs.has_null or (wl is not None and bsdfs.has_null_lobes)):
+        # Nothing to cross: one occlusion test (no loop, no surface interaction).
+        ray = mi.Ray3f(ray)
+        ray.maxt = dr.norm(p_light - ray.o) * (1.0 - SHADOW_EPSILON)
+        blocked = scene.geometry.occluded(ray, active)
+        return (dr.select(blocked, 0.0, state[0]),) + tuple(state[1:])
+    return _march(scene, ray, p_light, medium, active, state, segment, args, wl, crossing, crossing_args)
+
+
+@dr.syntax
+def _march(scene, ray, p_light, medium, active, state, segment, args, wl, crossing, crossing_args):
+    """:func:`transmittance`'s walk from surface to surface."""
+    has_media = len(scene.media) > 0
     going = mi.Bool(active)
     med = mi.UInt32(medium)
     ray = mi.Ray3f(ray)
-    has_media = len(scene.media) > 0
-    while dr.hint(going, label="shadow_ray"):
+    while dr.hint(going, label="shadow_ray", exclude=[p_light]):
         remaining = dr.norm(p_light - ray.o)
         si, shape = scene.geometry.intersect(ray, going)
         hit = going & si.is_valid() & (si.t < remaining * (1.0 - SHADOW_EPSILON))
