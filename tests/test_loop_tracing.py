@@ -135,3 +135,20 @@ def test_simplepath_randomwalk_ptracer_loops_traced_once(monkeypatch, integrator
     scene = pbr.load_dict(d)
     traces = _body_traces(monkeypatch, integrator["type"], lambda: np.asarray(pbr.render(scene, seed=1)))
     assert traces == [1]
+
+
+@pytest.mark.parametrize("integrator, labels", [
+    ({"type": "direct", "emitter_samples": 2, "bsdf_samples": 2}, ("direct_emitter", "direct_bsdf")),
+    ({"type": "whitted", "max_depth": 3}, ("whitted_lights",))])
+@pytest.mark.parametrize("sampler", ["independent", "sobol"])
+def test_direct_and_whitted_light_loops_traced_once(monkeypatch, integrator, labels, sampler):
+    """Their per-vertex light/BSDF sample loops keep the hit, its shading context, BSDF
+    entry, mask and the sample stream's constants out of the loop state."""
+    d = _cornell(integrator=integrator)
+    d["sensor"]["sampler"] = {"type": sampler, "sample_count": 4}
+    d["glass"] = {"type": "sphere", "center": [0.2, -0.2, 0.1], "radius": 0.25, "bsdf": {"type": "dielectric"}}
+    scene = pbr.load_dict(d)
+    for label in labels:
+        traces = _body_traces(monkeypatch, label, lambda: np.asarray(pbr.render(scene, seed=1)))
+        assert traces and set(traces) == {1}, (label, traces)
+        monkeypatch.undo()

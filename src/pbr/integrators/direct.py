@@ -114,8 +114,12 @@ class DirectIntegrator(SamplingIntegrator):
 
         # Light sampling (only where the BSDF has a smooth lobe).
         smooth = hit & bsdfs.smooth(bsdf_id, hit)
+        # Loop state: only what an iteration changes (the rest would make Dr.Jit trace
+        # each body twice, see path's loop); the stream carries its varying arrays.
         i = mi.UInt32(0)
-        while dr.hint(smooth & (i < n_em), label="direct_emitter"):
+        rng_state = rng.loop_state()
+        while dr.hint(smooth & (i < n_em), label="direct_emitter", exclude=[rng, wl, si, ctx, bsdf_id, smooth]):
+            rng.set_loop_state(rng_state)
             u_light = rng.next_float32()
             u_pos = rng.next_2d()
             ls = lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl, smooth)
@@ -125,10 +129,14 @@ class DirectIntegrator(SamplingIntegrator):
             w = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf * frac_em, pdf_b * frac_bs)) * inv_em
             L += dr.select(em, f * ls.L * (w / ls.pdf), 0.0)
             i += 1
+            rng_state = rng.loop_state()
+        rng.set_loop_state(rng_state)
 
         # BSDF sampling: count what the sampled ray finds on an emitter.
         j = mi.UInt32(0)
-        while dr.hint(hit & (j < n_bs), label="direct_bsdf"):
+        rng_state = rng.loop_state()
+        while dr.hint(hit & (j < n_bs), label="direct_bsdf", exclude=[rng, wl, si, ctx, bsdf_id, hit]):
+            rng.set_loop_state(rng_state)
             u1 = rng.next_float32()
             u2 = rng.next_2d()
             bs = bsdfs.sample(bsdf_id, ctx, u1, u2, hit)
@@ -140,15 +148,19 @@ class DirectIntegrator(SamplingIntegrator):
             pdf_e = lights.pdf_Li(self.light_sampler, light - 1, si.p, si.n, si_b, on & ~bs.delta)
             w = power_heuristic(bs.pdf * frac_bs, dr.select(bs.delta, 0.0, pdf_e) * frac_em)
             Lb = dr.select(on, Le * w, 0.0)
-            if infinite:
+            # Plain ifs (mode="scalar"): a transformed one would make the excluded
+            # variables it reads variables of the body, unbound there.
+            if dr.hint(infinite, mode="scalar"):
                 esc = go & ~si_b.is_valid()
                 for Le_inf, pdf_inf in lights.Le_escaped(ray_b.d, wl, si.p, si.n, esc, self.light_sampler):
                     w_inf = power_heuristic(bs.pdf * frac_bs, dr.select(bs.delta, 0.0, pdf_inf) * frac_em)
                     Lb += dr.select(esc, Le_inf * w_inf, 0.0)
             Lb = bs.weight * Lb * inv_bs
-            if bsdfs.dispersive:
+            if dr.hint(bsdfs.dispersive, mode="scalar"):
                 Lb = dr.select(bs.terminate, first_only(Lb), Lb)
             L += dr.select(go, Lb, 0.0)
             j += 1
+            rng_state = rng.loop_state()
+        rng.set_loop_state(rng_state)
 
         return L, hit

@@ -10,6 +10,7 @@ import mitsuba as mi
 
 from ..bsdfs.base import ShadingContext
 from ..samplers import IndependentSampler
+from ..samplers.independent import IndependentStream
 from ..spectrum import N_WAVELENGTHS, SampledWavelengths, first_only
 from .base import INTEGRATORS, SamplingIntegrator
 from .direct import hit_emission, intersect_camera_ray
@@ -61,7 +62,7 @@ class WhittedIntegrator(SamplingIntegrator):
         valid = None
         for depth in range(self.max_depth):
             if depth > 0:
-                rng = IndependentSampler.make_rng(code, dr.gather(mi.UInt32, key, slot))
+                rng = IndependentStream(rng=IndependentSampler.make_rng(code, dr.gather(mi.UInt32, key, slot)))
                 wl_k = SampledWavelengths(dr.gather(mi.Spectrum, wl.lambda_, slot),
                                           dr.gather(mi.Spectrum, wl.pdf, slot))
             else:
@@ -127,7 +128,11 @@ class WhittedIntegrator(SamplingIntegrator):
             # Direct light: one sample of every light.
             smooth = hit & bsdfs.smooth(bsdf_id, hit)
             k = dr.zeros(mi.UInt32, dr.width(smooth))
-            while dr.hint(smooth & (k < lights.n_lights), label="whitted_lights"):
+            # Only what an iteration changes is loop state (see path's loop).
+            rng_state = rng.loop_state()
+            while dr.hint(smooth & (k < lights.n_lights), label="whitted_lights",
+                          exclude=[rng, wl, si, ctx, bsdf_id, smooth]):
+                rng.set_loop_state(rng_state)
                 u = mi.Point2f(rng.next_float32(), rng.next_float32())
                 ls = lights.sample_Li_light(k, si, u, wl, smooth)
                 em = smooth & (ls.pdf > 0)
@@ -135,6 +140,8 @@ class WhittedIntegrator(SamplingIntegrator):
                 f = bsdfs.eval_pdf(bsdf_id, ctx, si.to_local(ls.wi), em)[0]
                 L += dr.select(em, f * ls.L / ls.pdf, 0.0)
                 k += 1
+                rng_state = rng.loop_state()
+            rng.set_loop_state(rng_state)
 
             # The specular branches, each weighted by its lobe's Fresnel factor.
             u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
