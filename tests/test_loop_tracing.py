@@ -152,3 +152,34 @@ def test_direct_and_whitted_light_loops_traced_once(monkeypatch, integrator, lab
         traces = _body_traces(monkeypatch, label, lambda: np.asarray(pbr.render(scene, seed=1)))
         assert traces and set(traces) == {1}, (label, traces)
         monkeypatch.undo()
+
+
+@pytest.mark.parametrize("fog", [False, True])
+def test_prbvolpath_loops_traced_once(monkeypatch, fog):
+    """prbvolpath, primal and both derivative modes, with and without a medium: the
+    forward derivative, medium index, null-collision count and adjoint radiance are loop
+    state only where they change."""
+    d = _cornell(integrator={"type": "prbvolpath", "max_depth": 4})
+    if fog:
+        d["fog"] = {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": 0.3, "bsdf": {"type": "null"},
+                    "interior": {"type": "homogeneous", "sigma_t": 2.0, "albedo": 0.8}}
+    scene = pbr.load_dict(d)
+    assert _body_traces(monkeypatch, "prbvolpath", lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
+    monkeypatch.undo()
+    for mode in ("forward", "backward"):
+        params = pbr.traverse(scene)
+        key = "red.reflectance.value"
+        dr.enable_grad(params[key])
+        params.update()
+
+        def run():
+            img = pbr.render(scene, params, seed=1)
+            if mode == "forward":
+                dr.forward(params[key])
+                np.asarray(dr.grad(img))
+            else:
+                dr.backward(dr.mean(img, axis=None))
+                np.asarray(dr.grad(params[key]))
+        traces = _body_traces(monkeypatch, "prbvolpath", run)
+        assert len(traces) >= 2 and set(traces) == {1}, (mode, traces)
+        monkeypatch.undo()

@@ -442,6 +442,27 @@ def loop_ray(varying, fixed) -> mi.Ray3f:
     return mi.Ray3f(*varying, *fixed)
 
 
+class ConditionalState:
+    """Loop variables that change only in some configurations (a medium index without
+    media, a forward derivative outside forward mode): :attr:`state` holds those that
+    change and is the loop's state; the others are constants read from outside the loop
+    (``dr.hint(exclude=[...])``, see :func:`ray_state`). ``values(state)`` gives every
+    variable in order at the start of an iteration, ``update(**v)`` the new state at its end."""
+
+    def __init__(self, **entries):
+        """``name=(initial value, changes)`` for each variable, in the order
+        :meth:`values` returns them."""
+        self.names = tuple(entries)
+        self.state = {k: v for k, (v, changes) in entries.items() if changes}
+        self.fixed = {k: v for k, (v, changes) in entries.items() if not changes}
+
+    def values(self, state: dict) -> tuple:
+        return tuple(state[k] if k in state else self.fixed[k] for k in self.names)
+
+    def update(self, **values) -> dict:
+        return {k: values[k] for k in self.names if k in self.state}
+
+
 def mis_state(ray):
     """The previous vertex that MIS weights of emitter hits refer to, at the start of a
     path: (``prev_p`` the camera ray's origin, ``prev_n`` 0, ``prev_pdf`` 1, ``prev_delta``

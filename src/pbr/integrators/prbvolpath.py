@@ -15,8 +15,8 @@ from ..plugins.props import SceneError
 from ..sampling import power_heuristic
 from ..spectrum import first_only
 from . import volume
-from .base import (INTEGRATORS, BACKWARD, PRIMAL, depth_limit, emitted_mis, forward_derivative, mis_state,
-                   path_state)
+from .base import (INTEGRATORS, BACKWARD, FORWARD, PRIMAL, ConditionalState, depth_limit, emitted_mis,
+                   forward_derivative, mis_state, path_state)
 from .volpath import _MediumAware
 
 
@@ -202,14 +202,23 @@ class PRBVolPathIntegrator(_MediumAware):
 
         ray, active, L, beta, depth, valid = path_state(ray, active, None if primal else L_in)
         prev_p, prev_n, prev_pdf, prev_delta = mis_state(ray)
-        dL_fwd = mi.Spectrum(0.0)
         dL = mi.Spectrum(0.0) if dL is None else mi.Spectrum(dL)
         eta = mi.Float(1.0)
-        medium = mi.UInt32(self._medium)
-        terminated = mi.Bool(False)
-        n_null = mi.UInt32(0)
+        # Loop state holds only what a bounce changes (see path's loop): not the
+        # wavelengths, the adjoint dL nor the sample stream's constants; the forward
+        # derivative only in forward mode, the medium index and null-collision count only
+        # with media, the dispersion flag only with dispersion.
+        cond = ConditionalState(dL_fwd=(mi.Spectrum(0.0), mode == FORWARD),
+                                medium=(mi.UInt32(self._medium), has_media), n_null=(mi.UInt32(0), has_media),
+                                terminated=(mi.Bool(False), bsdfs.dispersive and primal))
+        cond_state = cond.state
+        rng_state = rng.loop_state()
 
-        while dr.hint(active, label="prbvolpath"):
+        # The body's ifs on Python values are plain ifs (mode="scalar"), so that the
+        # excluded variables they read stay outside the loop.
+        while dr.hint(active, label="prbvolpath", exclude=[rng, wl, dL, cond]):
+            rng.set_loop_state(rng_state)
+            dL_fwd, medium, n_null, terminated = cond.values(cond_state)
             # Replays differentiate the hit w.r.t. the geometry (it moves along the ray).
             si, shape = geo.intersect(ray, active, attached=not primal)
             hit = si.is_valid()
@@ -218,7 +227,7 @@ class PRBVolPathIntegrator(_MediumAware):
             # -- free flight (delta tracking with real/null events) ----------------------
             scattered = mi.Bool(False)
             p_sc = mi.Point3f(0.0)
-            if has_media:
+            if dr.hint(has_media, mode="scalar"):
                 in_m = active & (medium > 0)
                 homog = in_m & ~self._grid_lanes(media, medium - 1, in_m)
                 beta, p_sc, scattered, n_null, dL_fwd = volume.free_flight(
@@ -233,12 +242,12 @@ class PRBVolPathIntegrator(_MediumAware):
             skip = on_light & (depth == 0) if self.hide_emitters else mi.Bool(False)
             on_light &= ~skip
             escaped = active & ~scattered & ~hit & (dr.max(beta) > 0)
-            if self.hide_emitters:
+            if dr.hint(self.hide_emitters, mode="scalar"):
                 escaped &= depth > 0
             with dr.resume_grad(when=not primal):
                 Le = beta * emitted_mis(scene, self.light_sampler, light, si, ray.d, wl, on_light, escaped,
                                         prev_p, prev_n, prev_pdf, prev_delta)
-            if primal:
+            if dr.hint(primal, mode="scalar"):
                 L = L + Le
             else:
                 L = L - dr.detach(Le)
@@ -250,7 +259,7 @@ class PRBVolPathIntegrator(_MediumAware):
             rs_sample = rs
             lobe = mi.Bool(False)
             crossed = mi.Bool(False)
-            if bsdfs.has_null_lobes:
+            if dr.hint(bsdfs.has_null_lobes, mode="scalar"):
                 # A null lobe (thindielectric's transmission) is no bounce (Mitsuba's
                 # volumetric integrators): such surfaces are sampled at the depth limit too.
                 lobe = real & bsdfs.has_null_lobe(bsdf_id, real) & (depth < max_depth)
@@ -268,7 +277,7 @@ class PRBVolPathIntegrator(_MediumAware):
                 ls = lights.sample_Li(self.light_sampler, ref, u_light, u_pos, wl, nee)
                 wo_em = si.to_local(ls.wi)
                 f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs_sample)
-                if has_media:
+                if dr.hint(has_media, mode="scalar"):
                     f_em, pdf_em = volume.phase_nee(media, medium, ray, ls.wi, sc, f_em, pdf_em)
                 # (MIS weight detached; the attached density carries the derivative of an
                 # area light sample's solid-angle measure when the shading point moves)
@@ -281,7 +290,7 @@ class PRBVolPathIntegrator(_MediumAware):
             nee &= ls.pdf > 0
             state = rng.copy()
             T_sh, _ = self._transmittance(scene, rng, sray, ls.p, s_med, wl, PRIMAL, dL, dL, dL_fwd, nee)
-            if primal:
+            if dr.hint(primal, mode="scalar"):
                 L = L + dr.detach(Ld_unocc) * T_sh
             else:
                 Ld = dr.detach(Ld_unocc) * T_sh
@@ -292,11 +301,11 @@ class PRBVolPathIntegrator(_MediumAware):
 
             # -- continue: BSDF or phase function sampling ----------------------------------------
             wi_next, pdf_next, w_next, delta_next = volume.sample_direction(media, medium, ray, si, bs, sc, rng)
-            if bsdfs.has_null_lobes:
+            if dr.hint(bsdfs.has_null_lobes, mode="scalar"):
                 # (The lobe weight's derivative, from specular_transmittance only, is not propagated.)
                 crossed = volume.cross_null_lobe(bs, lobe, beta, go_on, rs, at_vertex, skip)
             cont = go_on & (pdf_next > 0)
-            if not primal:
+            if dr.hint(not primal, mode="scalar"):
                 with dr.resume_grad():
                     f_bs, _ = bsdfs.eval_pdf(bsdf_id, ctx, bs.wo, rs & cont & ~replay_sample)
                     f_bs = dr.select(replay_sample, f_sampled, f_bs)
@@ -309,7 +318,7 @@ class PRBVolPathIntegrator(_MediumAware):
                     # the BSDF query's graph (f_em and f_sampled), which a first traversal
                     # would clear.
                     dL_fwd = self._send(mode, dL, Lr + Ld_unocc * T_sh, dL_fwd)
-            if bsdfs.dispersive and primal:
+            if dr.hint(bsdfs.dispersive and primal, mode="scalar"):
                 term = rs & bs.terminate & ~terminated
                 L[term] = first_only(L)
                 beta[term] = first_only(beta)
@@ -329,5 +338,10 @@ class PRBVolPathIntegrator(_MediumAware):
             survive = rng.next_float32() < q
             beta[rr] = beta * dr.rcp(q)
             active = skip | (cont & (~rr | survive) & (dr.max(beta) > 0))
+            cond_state = cond.update(dL_fwd=dL_fwd, medium=medium, n_null=n_null, terminated=terminated)
+            rng_state = rng.loop_state()
+
+        rng.set_loop_state(rng_state)
+        dL_fwd = cond.values(cond_state)[0]
 
         return (L if primal else dL_fwd), valid

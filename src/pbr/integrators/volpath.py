@@ -15,7 +15,7 @@ from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..spectrum import first_only
 from . import volume
-from .base import INTEGRATORS, SamplingIntegrator, depth_limit, mis_state, path_state
+from .base import INTEGRATORS, ConditionalState, SamplingIntegrator, depth_limit, mis_state, path_state
 
 
 def _null_weights(f, r_u, r_l, T_acc, sigma_n, sigma_maj, inv_pdf, mask):
@@ -202,15 +202,16 @@ class VolPathIntegrator(_MediumAware):
         # Only what a bounce changes is loop state (see path's loop): not the wavelengths
         # nor the sample stream's constants, and the dispersion flag only with dispersion.
         # Without media the spectral MIS ratio r_u (1), the null-collision count and the
-        # medium index (vacuum) never change: they are state (``in_media``) only with media.
+        # medium index (vacuum) never change: they are loop state only with media.
         terminated = mi.Bool(False) if bsdfs.dispersive else None
-        vacuum = (mi.Spectrum(1.0), mi.UInt32(0), mi.UInt32(self._medium))
-        in_media = vacuum if has_media else None
+        cond = ConditionalState(r_u=(mi.Spectrum(1.0), has_media), n_null=(mi.UInt32(0), has_media),
+                                medium=(mi.UInt32(self._medium), has_media))
+        cond_state = cond.state
         rng_state = rng.loop_state()
 
-        while dr.hint(active, label="volpath", exclude=[rng, wl, vacuum]):
+        while dr.hint(active, label="volpath", exclude=[rng, wl, cond]):
             rng.set_loop_state(rng_state)
-            r_u, n_null, medium = in_media if has_media else vacuum
+            r_u, n_null, medium = cond.values(cond_state)
             si, shape = geo.intersect(ray, active)
             hit = si.is_valid()
             t_hit = dr.select(hit, si.t, dr.inf)
@@ -321,8 +322,7 @@ class VolPathIntegrator(_MediumAware):
             survive = rng.next_float32() < q
             beta[rr] = beta * dr.rcp(q)
             active = skip | (cont & (~rr | survive) & (dr.max(beta) > 0))
-            if dr.hint(has_media, mode="scalar"):
-                in_media = (r_u, n_null, medium)
+            cond_state = cond.update(r_u=r_u, n_null=n_null, medium=medium)
             rng_state = rng.loop_state()
 
         rng.set_loop_state(rng_state)
