@@ -1171,11 +1171,9 @@ class PBRTScene:
 
     def material(self, p: _Params, t: str) -> dict:
         b = self._material(p, t)
-        for k in ("displacement",):
-            if p.has(k):
-                p.p[k].used = True
-                self.unsupported(p.d, "material 'displacement' (bump mapping)")
         nm = p.string("normalmap")
+        if p.has("displacement"):
+            b = self._displacement(p, b, nm)
         full = resolve(nm, self.base) if nm else None
         if nm and not os.path.exists(full):
             self.missing(p.p["normalmap"].where, p.d.name, nm, full)
@@ -1187,6 +1185,23 @@ class PBRTScene:
             p.p["type"].used = True
         self.warn_unused(p, f"material {t!r}")
         return b
+
+    def _displacement(self, p: _Params, b: dict, normalmap) -> dict:
+        """pbrt-v4's material ``displacement`` (a float texture): pbr's ``bumpmap`` around
+        the BSDF (the texture differenced as pbrt-v4's BumpMap does). pbrt-v4 ignores it
+        when the material has a normal map; a constant displaces nothing."""
+        d = p.value("displacement", 0.0, kind="float")
+        if normalmap:
+            self.note(p.p["displacement"].where, "Material: 'displacement' is ignored with a 'normalmap' "
+                                                 "(pbrt-v4 uses the normal map)")
+            return b
+        if isinstance(d, float):
+            return b
+        if self.mitsuba and d.get("type") != "bitmap":
+            self.unsupported(p.d, "material 'displacement' of a non-image texture (Mitsuba's bumpmap takes "
+                                  "bitmaps): ignored")
+            return b
+        return {"type": "bumpmap", "displacement": d, "bsdf": b}
 
     def _material(self, p: _Params, t: str) -> dict:
         two = lambda b: {"type": "twosided", "bsdf": b}    # pbrt-v4's reflective BSDFs are two-sided
