@@ -401,3 +401,54 @@ def test_directionmix_and_bilerp_read_from_pbrt(tmp_path):
     flat = img(light + 'Texture "b" "spectrum" "bilerp" "rgb v00" [0.8 0.3 0.1] "rgb v01" [0.8 0.3 0.1]'
                ' "rgb v10" [0.8 0.3 0.1] "rgb v11" [0.8 0.3 0.1]\nMaterial "diffuse" "texture reflectance" "b"')
     assert np.abs(flat - ref).max() < 1e-3 * ref.max()
+
+
+# -- medium presets ----------------------------------------------------------------------------
+
+MEDIUM = """
+LookAt 0 0 3  0 0 0  0 1 0
+Camera "perspective" "float fov" 40
+Film "rgb" "integer xresolution" 8 "integer yresolution" 8
+WorldBegin
+MakeNamedMedium "m" "string type" "{type}" {params}
+AttributeBegin
+MediumInterface "m" ""
+Material "interface"
+Shape "sphere" "float radius" 1
+AttributeEnd
+"""
+
+# (sigma'_s, sigma_a) in mm^-1 as printed in Jensen et al. 2001 (table 2) and Narasimhan
+# et al. 2006 (table 1), typed here from the papers' values.
+PUBLISHED = {"Apple": ((2.29, 2.39, 1.97), (0.0030, 0.0034, 0.046)),
+             "Skimmilk": ((0.70, 1.22, 1.90), (0.0014, 0.0025, 0.0142)),
+             "Ketchup": ((0.18, 0.07, 0.03), (0.061, 0.97, 1.45)),
+             "Espresso": ((0.72378, 0.84557, 1.0247), (4.7984, 6.5751, 8.8493)),
+             "Regular Milk": ((4.5513, 5.8294, 7.136), (0.0015333, 0.0046, 0.019933))}
+
+
+def _medium(tmp_path, typ, params, **kw):
+    d, notes, _ = convert(write(tmp_path, MEDIUM.format(type=typ, params=params)), **kw)
+    return d["medium_m"], notes
+
+
+@pytest.mark.parametrize("name", sorted(PUBLISHED))
+def test_medium_preset_is_the_published_table(tmp_path, name):
+    """pbrt-v4's preset: sigma_s = the measured reduced scattering sigma'_s, sigma_a, both
+    in mm^-1 and times ``scale``; explicit sigma_a/sigma_s are replaced (noted)."""
+    m, notes = _medium(tmp_path, "homogeneous", f'"string preset" "{name}" "float scale" 10 "rgb sigma_a" [1 1 1]')
+    sps, sa = PUBLISHED[name]
+    assert m["sigma_s"] == {"type": "rgb", "value": list(sps)}
+    assert m["sigma_a"] == {"type": "rgb", "value": list(sa)}
+    assert m["scale"] == 10.0
+    assert any("replaces sigma_a and sigma_s" in n for n in notes)
+
+
+def test_medium_preset_errors_and_grids(tmp_path):
+    with pytest.raises(XMLError, match="unknown preset 'Skim milk' .did you mean 'Skimmilk'"):
+        _medium(tmp_path, "homogeneous", '"string preset" "Skim milk"')
+    with pytest.raises(XMLError, match="an rgbgrid takes its coefficients from its grids"):
+        _medium(tmp_path, "rgbgrid", '"string preset" "Apple" "rgb sigma_a" [1 1 1]')
+    m, notes = _medium(tmp_path, "uniformgrid", '"string preset" "Cream" "float density" [1]')
+    assert m["sigma_a"]["value"] == [0.0002, 0.0028, 0.0163] and m["sigma_s"]["value"] == [7.38, 5.47, 3.15]
+    assert any("reads 'preset' for homogeneous media only" in n for n in notes)

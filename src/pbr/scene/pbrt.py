@@ -47,6 +47,8 @@ from ..integrators import INTEGRATORS
 from ..lights import LIGHT_TYPES
 from ..lights.goniometric import equal_area_sphere_to_square
 from ..media.mediumset import MEDIUM_TYPES
+from ..media.presets import MEASURED_SCATTERING, measured_scattering
+from ..plugins.props import did_you_mean
 from ..spectrum import CIE_Y_INTEGRAL, LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, blackbody, cie_tables_np, xyz_to_srgb
 from ..textures import TEXTURE_TYPES
 from .pbrt_tokens import Directive, Param, read_directives, resolve
@@ -1321,11 +1323,25 @@ class PBRTScene:
         t = p.string("type")
         if t is None:
             raise p.error(None, "MakeNamedMedium needs \"string type\"")
-        if p.has("preset"):
-            self.unsupported(p.d, f"medium preset {p.string('preset')!r} (pbrt-v4's measured scattering tables)")
         common = {"sigma_a": p.value("sigma_a", 1.0, kind="unbounded"),
                   "sigma_s": p.value("sigma_s", 1.0, kind="unbounded"),
                   "scale": p.one("scale", "float", 1.0), "g": p.one("g", "float", 0.0)}
+        preset = p.string("preset")
+        if preset and t == "rgbgrid":
+            raise p.error("preset", "an rgbgrid takes its coefficients from its grids, not a preset")
+        if preset:
+            # pbrt-v4: the measured coefficients (mm^-1) replace sigma_a and sigma_s, times scale
+            if t != "homogeneous":
+                self.note(p.p["preset"].where, f"MakeNamedMedium: pbrt-v4 reads 'preset' for homogeneous media "
+                                               f"only (a {t} reports it unused); pbr applies it")
+            coeffs = measured_scattering(preset)
+            if coeffs is None:
+                raise p.error("preset", f"unknown preset {preset!r}{did_you_mean(preset, MEASURED_SCATTERING)} "
+                                        f"(pbrt-v4's: {', '.join(MEASURED_SCATTERING)})")
+            if p.has("sigma_a") or p.has("sigma_s"):
+                self.note(p.p["preset"].where, f"MakeNamedMedium: preset {preset!r} replaces sigma_a and sigma_s "
+                                               "(as in pbrt-v4)")
+            common["sigma_a"], common["sigma_s"] = ({"type": "rgb", "value": list(c)} for c in coeffs)
         le = p.value("Le", None, kind="illuminant")
         if le is not None:
             common["Le"] = le
