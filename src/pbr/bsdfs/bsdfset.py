@@ -17,7 +17,7 @@ from ..plugins.props import UNIT, SceneError, did_you_mean
 from ..spectrum import luminance_rgb
 from ..textures import load_spectrum
 from . import perturb
-from .base import BSDF_TYPES, BSDFSample, BSDFType, ShadingContext, DIFFUSE, GLOSSY, TRANSMISSION
+from .base import BSDF_TYPES, BSDFSample, BSDFType, DIFFUSE, GLOSSY, TRANSMISSION
 from .null import pass_through
 
 NO_BACK = 0xFFFFFFFF
@@ -219,6 +219,12 @@ class BSDFSet:
             smooth[i] = smooth[a] or smooth[b]
         self.smooth_of = mi.Bool(smooth)
         self.all_smooth = all(smooth)
+        # Entries that regularisation makes glossy (smooth conductors and dielectrics).
+        glossy = [self.families[t].regularizes_to_glossy for t, _, _, _ in self.entries]
+        for i, (a, b, _) in self.blend_of.items():
+            glossy[i] = glossy[a] or glossy[b]
+        self.regularized_smooth_of = mi.Bool(glossy)
+        self.any_regularizes = any(glossy)
         # Entries whose sample weight is a random estimate (see BSDFType.stochastic).
         stoch = [self.families[t].stochastic or (b != NO_BACK and self.families[self.entries[b][0]].stochastic)
                  for t, _, b, _ in self.entries]
@@ -237,11 +243,16 @@ class BSDFSet:
         self.null_lobe_of = mi.Bool(lobe)
         self.has_null_lobes = any(lobe)
 
-    def smooth(self, bsdf_id, active):
-        """True where the entry has a non-delta lobe (worth sampling a light for)."""
+    def smooth(self, bsdf_id, active, regularize=None):
+        """True where the entry has a non-delta lobe (worth sampling a light for), and
+        where ``regularize`` (a mask: pbrt-v4's BSDF regularisation) makes a smooth
+        conductor or dielectric glossy."""
         if self.all_smooth:
             return mi.Bool(True)
-        return dr.gather(mi.Bool, self.smooth_of, bsdf_id, active)
+        s = dr.gather(mi.Bool, self.smooth_of, bsdf_id, active)
+        if regularize is not None and self.any_regularizes:
+            s |= regularize & dr.gather(mi.Bool, self.regularized_smooth_of, bsdf_id, active & regularize)
+        return s
 
     def stochastic(self, bsdf_id, active):
         """True where the entry's sample weight is a random estimate that ``eval`` does not
@@ -335,7 +346,7 @@ class BSDFSet:
         flip = (back != NO_BACK) & (ctx.si.wi.z < 0)
         si = mi.SurfaceInteraction3f(ctx.si)
         si.wi = _flip(si.wi, flip)
-        return dr.select(flip, back, bsdf_id), ShadingContext(si, ctx.wl), flip
+        return dr.select(flip, back, bsdf_id), ctx.at(si), flip
 
     def _opacity(self, bsdf_id, ctx, active):
         """Opacity of masked entries (1 elsewhere), or None if the scene has no mask."""
@@ -377,7 +388,7 @@ class BSDFSet:
             fb = perturb.bumpmap_frame(si, gu * scale, gv * scale, flip)
             frame = dr.select(bump, fb, frame)
         si.wi = frame.to_local(ctx.si.wi)
-        return ShadingContext(si, ctx.wl), frame, has
+        return ctx.at(si), frame, has
 
     def _resolve(self, bsdf_id, ctx, wo, active):
         """Apply the entry attributes that change the frame: the side (twosided, with

@@ -1860,7 +1860,11 @@ class PBRTScene:
                     raise p.error("lightsampler", f"expected uniform, power or bvh, got {ls!r}")
                 out["light_sampler"] = ls
             if p.bool("regularize", False):
-                self.unsupported(d, "'regularize'")
+                if t in ("path", "volpath") and not self.mitsuba:
+                    out["regularize"] = True     # pbr's path and volpath regularise as pbrt-v4's
+                else:
+                    self.unsupported(d, f"'regularize' with {t!r}" + (" (Mitsuba's integrators do not regularise)"
+                                                                      if self.mitsuba else ""))
             for q in p.d.params:
                 if not q.used and t in ("bdpt", "mlt", "sppm", "ambientocclusion"):
                     q.used = True
