@@ -3,7 +3,9 @@
 Patterns (pbrt-v4's names and parameters): ``fbm``, ``wrinkled``, ``windy`` (float
 textures: the same value at every wavelength), ``marble`` (an sRGB albedo), ``dots`` and
 pbrt-v4's ``checkerboard`` (2D or 3D; both blend two child textures, so they load as a
-``mix`` whose amount is the pattern). Noise is Perlin's improved noise with pbrt-v4's
+``mix`` whose amount is the pattern); ``bilerp`` (two ``mix`` levels weighted by the
+mapping's s and t) and ``directionmix`` (a ``mix`` weighted by |n . dir|) load the same
+way. Noise is Perlin's improved noise with pbrt-v4's
 permutation table; ``fbm``/``wrinkled`` sum octaves up to the frequency the pixel
 footprint resolves (pbrt-v4's ``FBm``/``Turbulence``), and the checkerboard is
 box-filtered over the footprint (pbrt-v4's closed form), so both antialias.
