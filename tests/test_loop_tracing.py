@@ -183,3 +183,17 @@ def test_prbvolpath_loops_traced_once(monkeypatch, fog):
         traces = _body_traces(monkeypatch, "prbvolpath", run)
         assert len(traces) >= 2 and set(traces) == {1}, (mode, traces)
         monkeypatch.undo()
+
+
+@pytest.mark.parametrize("integrator", ["path", "volpath"])
+def test_regularizing_loops_traced_once(monkeypatch, integrator):
+    """``regularize`` adds one loop-state mask (a non-specular bounce happened); it
+    changes, so the loop is still traced once (with a glass sphere to regularise; volpath
+    with a medium, see above)."""
+    d = pbr.scenes.glass_caustic(8, 1)
+    d["integrator"] = {"type": integrator, "max_depth": 6, "regularize": True}
+    if integrator == "volpath":
+        d["fog"] = {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": 0.3, "bsdf": {"type": "null"},
+                    "interior": {"type": "homogeneous", "sigma_t": 2.0, "albedo": 0.8}}
+    scene = pbr.load_dict(d)
+    assert _body_traces(monkeypatch, integrator, lambda: np.asarray(pbr.render(scene, seed=1))) == [1]

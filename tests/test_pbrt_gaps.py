@@ -336,3 +336,119 @@ def test_image_area_light(tmp_path):
     np.testing.assert_allclose(out[4:7, 6:10].mean(axis=(0, 1)), [k, 0, 0], atol=0.04 * k)
     with pytest.raises(XMLError, match="give either"):
         to_dict(write(tmp_path, AREA.format(z=5, light='"string filename" "e.exr" "rgb L" [1 1 1]'), "x.pbrt"))
+
+
+# -- material displacement (bump mapping), textures bilerp and directionmix --------------------
+
+QUAD = """
+LookAt 0 0 3  0 0 0  0 1 0
+Camera "perspective" "float fov" 40
+Film "rgb" "integer xresolution" 16 "integer yresolution" 16
+Sampler "independent" "integer pixelsamples" 4
+WorldBegin
+{world}
+Shape "trianglemesh" "point3 P" [-1 -1 0  1 -1 0  1 1 0  -1 1 0] "integer indices" [0 1 2  0 2 3]
+    "point2 uv" [0 0  1 0  1 1  0 1]
+"""
+
+
+@pytest.mark.parametrize("a", [0.4, 1.5])
+def test_displacement_tilts_the_shading_normal(tmp_path, a):
+    """pbrt-v4's BumpMap on a 2 x 2 quad with uv in [0, 1]^2 and d(u, v) = a u (a
+    ``bilerp`` float texture): dp/du' = dp/du + a n, so the shading normal tilts by
+    atan(a du/dp) = atan(a / 2) toward -x."""
+    world = (f'Texture "d" "float" "bilerp" "float v00" 0 "float v10" {a} "float v01" 0 "float v11" {a}\n'
+             'Material "diffuse" "texture displacement" "d"')
+    d = to_dict(write(tmp_path, QUAD.format(world=world)))
+    bsdf = next(v for v in d.values() if isinstance(v, dict) and v.get("type") == "bumpmap")
+    assert bsdf["displacement"]["type"] == "bilerp"
+    d["integrator"] = {"type": "aov", "aovs": "nn:sh_normal"}
+    n = np.asarray(pbr.render(pbr.load_dict(d), seed=1), np.float64)[3:-3, 3:-3]
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    assert np.abs(np.degrees(np.arccos(n[..., 2])) - math.degrees(math.atan(a / 2))).max() < 0.01
+    assert (n[..., 0] < 0).all()
+
+
+def test_displacement_notes(tmp_path):
+    """A constant displacement displaces nothing (no wrapper); with a normal map pbrt-v4
+    ignores the displacement (noted); Mitsuba's bumpmap takes bitmaps only."""
+    d = to_dict(write(tmp_path, QUAD.format(world='Material "diffuse" "float displacement" 0.3')))
+    assert all(v.get("type") != "bumpmap" for v in d.values() if isinstance(v, dict))
+    world = 'Texture "d" "float" "checkerboard"\nMaterial "diffuse" "texture displacement" "d"'
+    with pytest.raises(XMLError, match="displacement' of a non-image texture"):
+        convert(write(tmp_path, QUAD.format(world=world)), mitsuba=True)
+    flat = np.zeros((2, 2, 3), np.float32) + np.array([0.5, 0.5, 1.0], np.float32)
+    pbr.write_image(str(tmp_path / "n.exr"), flat)
+    world = 'Texture "d" "float" "fbm"\nMaterial "diffuse" "texture displacement" "d" "string normalmap" "n.exr"'
+    _, notes, _ = convert(write(tmp_path, QUAD.format(world=world)))
+    assert any("'displacement' is ignored with a 'normalmap'" in n for n in notes)
+
+
+def test_directionmix_and_bilerp_read_from_pbrt(tmp_path):
+    """``directionmix`` takes the CTM at its Texture directive for ``dir``: (0, 1, 0)
+    rotated to +z faces the quad's normal, so tex1 is seen (as a constant reflectance);
+    a ``bilerp`` of four equal values is that value."""
+    def img(world):
+        return render(write(tmp_path, QUAD.format(world=world)))
+    light = 'LightSource "infinite" "rgb L" [1 1 1]\n'
+    ref = img(light + 'Material "diffuse" "rgb reflectance" [0.8 0.3 0.1]')
+    mixed = img(light + 'AttributeBegin\nRotate 90 1 0 0\nTexture "m" "spectrum" "directionmix" "rgb tex1" [0.8 0.3 0.1]'
+                ' "rgb tex2" [0 0 1] "vector3 dir" [0 1 0]\nAttributeEnd\nMaterial "diffuse" "texture reflectance" "m"')
+    assert np.abs(mixed - ref).max() < 1e-4 * ref.max()
+    unrotated = img(light + 'Texture "m" "spectrum" "directionmix" "rgb tex1" [0.8 0.3 0.1] "rgb tex2" [0 0 1]'
+                    '\nMaterial "diffuse" "texture reflectance" "m"')
+    assert unrotated[..., 2].mean() > 2 * ref[..., 2].mean()
+    flat = img(light + 'Texture "b" "spectrum" "bilerp" "rgb v00" [0.8 0.3 0.1] "rgb v01" [0.8 0.3 0.1]'
+               ' "rgb v10" [0.8 0.3 0.1] "rgb v11" [0.8 0.3 0.1]\nMaterial "diffuse" "texture reflectance" "b"')
+    assert np.abs(flat - ref).max() < 1e-3 * ref.max()
+
+
+# -- medium presets ----------------------------------------------------------------------------
+
+MEDIUM = """
+LookAt 0 0 3  0 0 0  0 1 0
+Camera "perspective" "float fov" 40
+Film "rgb" "integer xresolution" 8 "integer yresolution" 8
+WorldBegin
+MakeNamedMedium "m" "string type" "{type}" {params}
+AttributeBegin
+MediumInterface "m" ""
+Material "interface"
+Shape "sphere" "float radius" 1
+AttributeEnd
+"""
+
+# (sigma'_s, sigma_a) in mm^-1 as printed in Jensen et al. 2001 (table 2) and Narasimhan
+# et al. 2006 (table 1), typed here from the papers' values.
+PUBLISHED = {"Apple": ((2.29, 2.39, 1.97), (0.0030, 0.0034, 0.046)),
+             "Skimmilk": ((0.70, 1.22, 1.90), (0.0014, 0.0025, 0.0142)),
+             "Ketchup": ((0.18, 0.07, 0.03), (0.061, 0.97, 1.45)),
+             "Espresso": ((0.72378, 0.84557, 1.0247), (4.7984, 6.5751, 8.8493)),
+             "Regular Milk": ((4.5513, 5.8294, 7.136), (0.0015333, 0.0046, 0.019933))}
+
+
+def _medium(tmp_path, typ, params, **kw):
+    d, notes, _ = convert(write(tmp_path, MEDIUM.format(type=typ, params=params)), **kw)
+    return d["medium_m"], notes
+
+
+@pytest.mark.parametrize("name", sorted(PUBLISHED))
+def test_medium_preset_is_the_published_table(tmp_path, name):
+    """pbrt-v4's preset: sigma_s = the measured reduced scattering sigma'_s, sigma_a, both
+    in mm^-1 and times ``scale``; explicit sigma_a/sigma_s are replaced (noted)."""
+    m, notes = _medium(tmp_path, "homogeneous", f'"string preset" "{name}" "float scale" 10 "rgb sigma_a" [1 1 1]')
+    sps, sa = PUBLISHED[name]
+    assert m["sigma_s"] == {"type": "rgb", "value": list(sps)}
+    assert m["sigma_a"] == {"type": "rgb", "value": list(sa)}
+    assert m["scale"] == 10.0
+    assert any("replaces sigma_a and sigma_s" in n for n in notes)
+
+
+def test_medium_preset_errors_and_grids(tmp_path):
+    with pytest.raises(XMLError, match="unknown preset 'Skim milk' .did you mean 'Skimmilk'"):
+        _medium(tmp_path, "homogeneous", '"string preset" "Skim milk"')
+    with pytest.raises(XMLError, match="an rgbgrid takes its coefficients from its grids"):
+        _medium(tmp_path, "rgbgrid", '"string preset" "Apple" "rgb sigma_a" [1 1 1]')
+    m, notes = _medium(tmp_path, "uniformgrid", '"string preset" "Cream" "float density" [1]')
+    assert m["sigma_a"]["value"] == [0.0002, 0.0028, 0.0163] and m["sigma_s"]["value"] == [7.38, 5.47, 3.15]
+    assert any("reads 'preset' for homogeneous media only" in n for n in notes)

@@ -378,3 +378,52 @@ def test_frozen_render_with_filtered_textures_and_a_tabulated_filter():
     for s in range(3):
         ref = np.asarray(pbr.render(scene, spp=4, seed=s))
         assert np.array_equal(np.asarray(frozen(scene, dr.opaque(mi.UInt32, s))), ref)
+
+
+# ------------------------------------------------------------------ bilerp, directionmix
+
+def _texture_values(tex, uv, n=None):
+    """Values (first wavelength) of ``tex`` as a diffuse reflectance, looked up at surface
+    coordinates ``uv`` (2, N) with geometric normals ``n`` (3, N)."""
+    from pbr import backend
+    scene = pbr.load_dict(_plane_scene(tex))
+    with backend.pbr_variant():
+        T = scene.textures
+        slot = next(i for i, t in enumerate(T.items) if t.path == "plane.bsdf.reflectance")
+        si = mi.SurfaceInteraction3f()
+        si.uv = mi.Point2f(*uv)
+        si.p = mi.Point3f(2 * uv[0] - 1, 2 * uv[1] - 1, 0.0)
+        si.dp_du, si.dp_dv = mi.Vector3f(2.0, 0.0, 0.0), mi.Vector3f(0.0, 2.0, 0.0)
+        si.n = mi.Normal3f(*(n if n is not None else np.tile([[0.0], [0.0], [1.0]], uv.shape[1])))
+        return np.array(T.eval(slot, si, mi.Spectrum(550.0), True, illuminant=False)[0], np.float64)
+
+
+def test_bilerp_matches_pbrt_formula():
+    """pbrt-v4's Bilerp over the uv mapping (s = uscale u + udelta, t = vscale v + vdelta):
+    (1-s)(1-t) v00 + s(1-t) v10 + (1-s) t v01 + s t v11, extrapolated outside [0, 1]^2;
+    pbrt-v4's defaults (0, 0, 1, 1) make t itself."""
+    uv = np.random.default_rng(3).random((2, 500))
+    tex = {"type": "bilerp", "v00": 0.1, "v10": 0.9, "v01": 0.4, "v11": 0.25, "uscale": 1.5, "vdelta": -0.2}
+    s, t = 1.5 * uv[0], uv[1] - 0.2
+    ref = (1 - s) * (1 - t) * 0.1 + s * (1 - t) * 0.9 + (1 - s) * t * 0.4 + s * t * 0.25
+    assert np.abs(_texture_values(tex, uv) - ref).max() < 1e-5
+    assert np.abs(_texture_values({"type": "bilerp"}, uv) - uv[1]).max() < 1e-6
+    with pytest.raises(SceneError, match="reflectance.mapping: expected one of"):
+        pbr.load_dict(_plane_scene({"type": "bilerp", "mapping": "polar"}))
+
+
+def test_directionmix_matches_pbrt_formula():
+    """pbrt-v4's DirectionMix: a = |n . dir| (dir normalised after the texture transform),
+    a tex1 + (1 - a) tex2; defaults dir (0, 1, 0), tex1 0, tex2 1."""
+    rng = np.random.default_rng(4)
+    n = rng.normal(size=(3, 400))
+    n /= np.linalg.norm(n, axis=0)
+    uv = rng.random((2, 400))
+    rot = mi.ScalarTransform4f().rotate([1, 0, 0], 90)     # (0, 2, 0) -> (0, 0, 2)
+    tex = {"type": "directionmix", "tex1": 0.7, "tex2": {"type": "bilerp"}, "dir": [0, 2, 0], "to_world": rot}
+    a = np.abs(n[2])
+    ref = a * 0.7 + (1 - a) * uv[1]
+    assert np.abs(_texture_values(tex, uv, n) - ref).max() < 1e-5
+    assert np.abs(_texture_values({"type": "directionmix"}, uv, n) - (1 - np.abs(n[1]))).max() < 1e-5
+    with pytest.raises(SceneError, match="reflectance.dir: the direction is zero"):
+        pbr.load_dict(_plane_scene({"type": "directionmix", "dir": [0, 0, 0]}))

@@ -44,10 +44,42 @@ class ShadingContext(metaclass=VariantStruct):
     ``BSDFSet.build``)."""
 
     _fields = {"si": "SurfaceInteraction3f", "wl": SampledWavelengths}
+    # Whether the context carries a ``regularize`` mask (:class:`RegularizedContext`): a
+    # class attribute, so that it survives Dr.Jit rebuilding the struct in loops and calls.
+    regularizing = False
 
     def __init__(self, si=None, wl=None):
         self.si = si if si is not None else mi.SurfaceInteraction3f()
         self.wl = wl if wl is not None else SampledWavelengths()
+
+    def at(self, si):
+        """The same context (class and other fields) at the surface interaction ``si``."""
+        return ShadingContext(si, self.wl)
+
+
+class RegularizedContext(ShadingContext):
+    """A shading context with pbrt-v4's BSDF regularisation: where ``regularize`` is set
+    (a path integrator's ``regularize`` after the path's first non-specular bounce),
+    microfacet roughness alpha below 0.3 becomes clamp(2 alpha, 0.1, 0.3)
+    (:func:`~.microfacet.regularized_alpha`) and smooth conductors and dielectrics become
+    rough ones of alpha 0.1, so that light sampling reaches caustic paths (biased, less
+    noisy)."""
+
+    _fields = {**ShadingContext._fields, "regularize": "Bool"}
+    regularizing = True
+
+    def __init__(self, si=None, wl=None, regularize=None):
+        super().__init__(si, wl)
+        self.regularize = regularize if regularize is not None else mi.Bool(False)
+
+    def at(self, si):
+        return RegularizedContext(si, self.wl, self.regularize)
+
+
+def shading_context(si, wl, regularize=None) -> ShadingContext:
+    """The context of a path vertex: a :class:`RegularizedContext` when ``regularize``
+    (a mask) is given, else a plain one (no regularisation code is traced)."""
+    return ShadingContext(si, wl) if regularize is None else RegularizedContext(si, wl, regularize)
 
 
 class BSDFType:
@@ -65,6 +97,10 @@ class BSDFType:
     # Whether a sample can cross into another medium (``BSDFSample.eta`` other than 1):
     # path tracers keep the relative IOR for Russian roulette only where some family does.
     refracts = False
+    # Whether pbrt-v4's regularisation (:class:`RegularizedContext`) turns the family's
+    # delta lobes into glossy ones (smooth conductors and dielectrics): light sampling at
+    # its vertices then pays off.
+    regularizes_to_glossy = False
 
     def __init__(self):
         self.instances: list = []

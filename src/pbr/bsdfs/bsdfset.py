@@ -17,7 +17,7 @@ from ..plugins.props import UNIT, SceneError, did_you_mean
 from ..spectrum import luminance_rgb
 from ..textures import load_spectrum
 from . import perturb
-from .base import BSDF_TYPES, BSDFSample, BSDFType, ShadingContext, DIFFUSE, GLOSSY, TRANSMISSION
+from .base import BSDF_TYPES, BSDFSample, BSDFType, DIFFUSE, GLOSSY, TRANSMISSION
 from .null import pass_through
 
 NO_BACK = 0xFFFFFFFF
@@ -101,7 +101,9 @@ class BSDFSet:
         name                    type     default  meaning
         ======================  =======  =======  ===============================================
         normalmap               texture  -        normalmap: a raw bitmap of normals in [0, 1]^3
-        (a texture key)         texture  -        bumpmap: a raw bitmap of heights
+        (a texture key)         texture  -        bumpmap: the height field h, any texture
+                                                  (a raw bitmap: its exact gradient; any
+                                                  other: forward differences, pbrt-v4's)
         scale                   float    1        bumpmap: factor on the height gradient
         flip_invalid_normals    bool     true     flip normals facing away from the incident side
         use_shadowing_function  bool     true     Estevez et al.'s shadowing term
@@ -203,6 +205,8 @@ class BSDFSet:
         self.pert_scale = mi.Float([x[2] for x in pert])
         kinds = {x[0] for x in self.perturb_of.values()}
         self.pert_kinds = kinds
+        self.pert_differenced = tuple(sorted({x[1] for x in self.perturb_of.values()
+                                              if x[0] == perturb.BUMP_DIFFERENCED}))
         self.pert_flip = {x[3] for x in self.perturb_of.values()}
         self.pert_shadow = {x[4] for x in self.perturb_of.values()}
         if len(self.pert_flip) > 1 or len(self.pert_shadow) > 1:
@@ -215,6 +219,12 @@ class BSDFSet:
             smooth[i] = smooth[a] or smooth[b]
         self.smooth_of = mi.Bool(smooth)
         self.all_smooth = all(smooth)
+        # Entries that regularisation makes glossy (smooth conductors and dielectrics).
+        glossy = [self.families[t].regularizes_to_glossy for t, _, _, _ in self.entries]
+        for i, (a, b, _) in self.blend_of.items():
+            glossy[i] = glossy[a] or glossy[b]
+        self.regularized_smooth_of = mi.Bool(glossy)
+        self.any_regularizes = any(glossy)
         # Entries whose sample weight is a random estimate (see BSDFType.stochastic).
         stoch = [self.families[t].stochastic or (b != NO_BACK and self.families[self.entries[b][0]].stochastic)
                  for t, _, b, _ in self.entries]
@@ -233,11 +243,16 @@ class BSDFSet:
         self.null_lobe_of = mi.Bool(lobe)
         self.has_null_lobes = any(lobe)
 
-    def smooth(self, bsdf_id, active):
-        """True where the entry has a non-delta lobe (worth sampling a light for)."""
+    def smooth(self, bsdf_id, active, regularize=None):
+        """True where the entry has a non-delta lobe (worth sampling a light for), and
+        where ``regularize`` (a mask: pbrt-v4's BSDF regularisation) makes a smooth
+        conductor or dielectric glossy."""
         if self.all_smooth:
             return mi.Bool(True)
-        return dr.gather(mi.Bool, self.smooth_of, bsdf_id, active)
+        s = dr.gather(mi.Bool, self.smooth_of, bsdf_id, active)
+        if regularize is not None and self.any_regularizes:
+            s |= regularize & dr.gather(mi.Bool, self.regularized_smooth_of, bsdf_id, active & regularize)
+        return s
 
     def stochastic(self, bsdf_id, active):
         """True where the entry's sample weight is a random estimate that ``eval`` does not
@@ -331,7 +346,7 @@ class BSDFSet:
         flip = (back != NO_BACK) & (ctx.si.wi.z < 0)
         si = mi.SurfaceInteraction3f(ctx.si)
         si.wi = _flip(si.wi, flip)
-        return dr.select(flip, back, bsdf_id), ShadingContext(si, ctx.wl), flip
+        return dr.select(flip, back, bsdf_id), ctx.at(si), flip
 
     def _opacity(self, bsdf_id, ctx, active):
         """Opacity of masked entries (1 elsewhere), or None if the scene has no mask."""
@@ -347,23 +362,33 @@ class BSDFSet:
         entries, or None if the scene has none."""
         if not self.perturb_of:
             return None
+        kinds = self.pert_kinds
         kind = dr.gather(mi.UInt32, self.pert_kind, bsdf_id, active)
         has = active & (kind != 0)
         slot = dr.gather(mi.UInt32, self.pert_slot, bsdf_id, has)
-        value, du, dv = self.textures.eval_raw(slot, ctx.si.uv, has)
         flip = next(iter(self.pert_flip))
         si = mi.SurfaceInteraction3f(ctx.si)
         frame = mi.Frame3f(mi.Vector3f(1, 0, 0), mi.Vector3f(0, 1, 0), mi.Vector3f(0, 0, 1))
-        if perturb.NORMAL in self.pert_kinds:
+        if kinds & {perturb.NORMAL, perturb.BUMP}:
+            raw = has & (kind != perturb.BUMP_DIFFERENCED) if perturb.BUMP_DIFFERENCED in kinds else has
+            value, du, dv = self.textures.eval_raw(slot, ctx.si.uv, raw)
+        if perturb.NORMAL in kinds:
             fn = perturb.normalmap_frame(value, si.wi, flip)
             frame = dr.select(has & (kind == perturb.NORMAL), fn, frame)
-        if perturb.BUMP in self.pert_kinds:
-            scale = dr.gather(mi.Float, self.pert_scale, bsdf_id, has)
-            lum = lambda g: luminance_rgb(g) * scale  # noqa: E731
-            fb = perturb.bumpmap_frame(si, lum(du), lum(dv), flip)
-            frame = dr.select(has & (kind == perturb.BUMP), fb, frame)
+        if kinds & {perturb.BUMP, perturb.BUMP_DIFFERENCED}:
+            bump = has & ((kind == perturb.BUMP) | (kind == perturb.BUMP_DIFFERENCED))
+            scale = dr.gather(mi.Float, self.pert_scale, bsdf_id, bump)
+            if perturb.BUMP in kinds:
+                gu, gv = luminance_rgb(du), luminance_rgb(dv)
+            if perturb.BUMP_DIFFERENCED in kinds:
+                diff = has & (kind == perturb.BUMP_DIFFERENCED)
+                hu, hv = perturb.height_gradient(self.textures, slot, ctx.si, ctx.wl.lambda_, diff,
+                                                 reach=self.pert_differenced)
+                gu, gv = (hu, hv) if perturb.BUMP not in kinds else (dr.select(diff, hu, gu), dr.select(diff, hv, gv))
+            fb = perturb.bumpmap_frame(si, gu * scale, gv * scale, flip)
+            frame = dr.select(bump, fb, frame)
         si.wi = frame.to_local(ctx.si.wi)
-        return ShadingContext(si, ctx.wl), frame, has
+        return ctx.at(si), frame, has
 
     def _resolve(self, bsdf_id, ctx, wo, active):
         """Apply the entry attributes that change the frame: the side (twosided, with

@@ -21,7 +21,8 @@ from ..spectrum import read_spd
 from ..textures import add_tabulated, load_spectrum
 from .base import BSDF_TYPES, BSDFType, BSDFSample, REFLECTION, GLOSSY, SPECULAR
 from .fresnel import fresnel_conductor, reflect, reflect_about
-from .microfacet import Microfacet, GGX, BECKMANN, VariantTable
+from .microfacet import (BECKMANN, GGX, REGULARIZED_ALPHA, REGULARIZED_VARIANT, Microfacet, VariantTable,
+                         regularized_alpha)
 
 _IOR_DIR = os.path.join(os.path.dirname(mi.__file__), "data", "ior")
 
@@ -74,6 +75,7 @@ class Conductor(BSDFType):
 
     name = "conductor"
     flags = REFLECTION | SPECULAR
+    regularizes_to_glossy = True
 
     def add(self, loader, props) -> int:
         eta, k = _load_eta_k(loader, props)
@@ -95,13 +97,63 @@ class Conductor(BSDFType):
         return fresnel_conductor(cos_i, ev("eta"), ev("k")) * ev("spec")
 
     def eval_pdf(self, ctx, idx, wo, active):
-        return mi.Spectrum(0.0), mi.Float(0.0)
+        if not ctx.regularizing:
+            return mi.Spectrum(0.0), mi.Float(0.0)
+        reg = active & ctx.regularize
+        f, pdf = self._micro_eval_pdf(ctx, idx, wo, reg, *self._regularized())
+        return dr.select(reg, f, 0.0), dr.select(reg, pdf, 0.0)
 
     def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
         wi = ctx.si.wi
         ok = active & (wi.z > 0)
         w = self._reflectance(ctx, idx, wi.z, ok)
-        return BSDFSample(reflect(wi), dr.select(ok, 1.0, 0.0), mi.Float(1.0), mi.Bool(True), dr.select(ok, w, 0.0))
+        bs = BSDFSample(reflect(wi), dr.select(ok, 1.0, 0.0), mi.Float(1.0), mi.Bool(True), dr.select(ok, w, 0.0))
+        if ctx.regularizing:     # pbrt-v4's regularised mirror: a rough one of alpha 0.1
+            reg = active & ctx.regularize
+            bs = dr.select(reg, self._micro_sample(ctx, idx, u2, reg, *self._regularized()), bs)
+        return bs
+
+    @staticmethod
+    def _regularized():
+        """(alpha_u, alpha_v, variant lane, variant table) of a regularised smooth metal."""
+        return mi.Float(REGULARIZED_ALPHA), mi.Float(REGULARIZED_ALPHA), None, VariantTable([REGULARIZED_VARIANT])
+
+    # -- microfacet reflection (roughconductor's, and regularised smooth metals') ----------
+    def _micro_eval_pdf(self, ctx, idx, wo, active, au, av, var, table):
+        wi = ctx.si.wi
+        ok = active & (wi.z > 0) & (wo.z > 0)
+        m = dr.normalize(wi + wo)
+
+        def micro(variant):
+            md = Microfacet(variant[0], au, av, variant[1])
+            return md.D(m) * md.G(wi, wo, m), md.pdf(wi, m)
+
+        dg, pdf_m = table.per_variant(var, micro)
+        F = self._reflectance(ctx, idx, dr.dot(wi, m), ok)
+        f = F * (dg / (4.0 * wi.z))
+        pdf = pdf_m / (4.0 * dr.dot(wo, m))
+        ok &= (pdf > 0) & dr.isfinite(pdf)
+        return dr.select(ok, f, 0.0), dr.select(ok, pdf, 0.0)
+
+    def _micro_sample(self, ctx, idx, u2, active, au, av, var, table) -> BSDFSample:
+        wi = ctx.si.wi
+        ok = active & (wi.z > 0)
+
+        def micro(variant):
+            md = Microfacet(variant[0], au, av, variant[1])
+            m, pdf_m = md.sample(wi, u2)
+            wo = reflect_about(wi, m)
+            # weight / F: the masking of wo (visible normals) or G (wi.m)/(cos_i m.z) (D cos).
+            g = md.G1(wo, m) if md.sample_visible else md.G(wi, wo, m) * dr.dot(wi, m) / (wi.z * m.z)
+            return m, pdf_m, g
+
+        m, pdf_m, g = table.per_variant(var, micro)
+        wo = reflect_about(wi, m)
+        ok &= (wo.z > 0) & (pdf_m > 0) & (dr.dot(wi, m) > 0)
+        pdf = pdf_m / (4.0 * dr.dot(wo, m))
+        w = self._reflectance(ctx, idx, dr.dot(wi, m), ok) * g
+        ok &= dr.isfinite(pdf)
+        return BSDFSample(wo, dr.select(ok, pdf, 0.0), mi.Float(1.0), mi.Bool(False), dr.select(ok, w, 0.0))
 
 
 @BSDF_TYPES.register("roughconductor")
@@ -155,45 +207,18 @@ class RoughConductor(Conductor):
         tex, uv, lam = self.textures, ctx.si, ctx.wl.lambda_
         a = lambda n: tex.eval(dr.gather(mi.UInt32, getattr(self, n), idx, active), uv, lam, active,  # noqa: E731
                                illuminant=False, reach=self.reach[n])[0]
-        return a("au"), a("av"), self.variant_table.lane(idx, active)
+        au, av = a("au"), a("av")
+        if ctx.regularizing:
+            au, av = regularized_alpha(au, ctx.regularize), regularized_alpha(av, ctx.regularize)
+        return au, av, self.variant_table.lane(idx, active), self.variant_table
 
     def eval_pdf(self, ctx, idx, wo, active):
-        wi = ctx.si.wi
-        ok = active & (wi.z > 0) & (wo.z > 0)
-        au, av, var = self._roughness(ctx, idx, ok)
-        m = dr.normalize(wi + wo)
-
-        def micro(variant):
-            md = Microfacet(variant[0], au, av, variant[1])
-            return md.D(m) * md.G(wi, wo, m), md.pdf(wi, m)
-
-        dg, pdf_m = self.variant_table.per_variant(var, micro)
-        F = self._reflectance(ctx, idx, dr.dot(wi, m), ok)
-        f = F * (dg / (4.0 * wi.z))
-        pdf = pdf_m / (4.0 * dr.dot(wo, m))
-        ok &= (pdf > 0) & dr.isfinite(pdf)
-        return dr.select(ok, f, 0.0), dr.select(ok, pdf, 0.0)
+        ok = active & (ctx.si.wi.z > 0) & (wo.z > 0)
+        return self._micro_eval_pdf(ctx, idx, wo, active, *self._roughness(ctx, idx, ok))
 
     def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
-        wi = ctx.si.wi
-        ok = active & (wi.z > 0)
-        au, av, var = self._roughness(ctx, idx, ok)
-
-        def micro(variant):
-            md = Microfacet(variant[0], au, av, variant[1])
-            m, pdf_m = md.sample(wi, u2)
-            wo = reflect_about(wi, m)
-            # weight / F: the masking of wo (visible normals) or G (wi.m)/(cos_i m.z) (D cos).
-            g = md.G1(wo, m) if md.sample_visible else md.G(wi, wo, m) * dr.dot(wi, m) / (wi.z * m.z)
-            return m, pdf_m, g
-
-        m, pdf_m, g = self.variant_table.per_variant(var, micro)
-        wo = reflect_about(wi, m)
-        ok &= (wo.z > 0) & (pdf_m > 0) & (dr.dot(wi, m) > 0)
-        pdf = pdf_m / (4.0 * dr.dot(wo, m))
-        w = self._reflectance(ctx, idx, dr.dot(wi, m), ok) * g
-        ok &= dr.isfinite(pdf)
-        return BSDFSample(wo, dr.select(ok, pdf, 0.0), mi.Float(1.0), mi.Bool(False), dr.select(ok, w, 0.0))
+        ok = active & (ctx.si.wi.z > 0)
+        return self._micro_sample(ctx, idx, u2, active, *self._roughness(ctx, idx, ok))
 
     def eval_pdf_sample(self, ctx, idx, wo, u1, u2, active):
         return BSDFType.eval_pdf_sample(self, ctx, idx, wo, u1, u2, active)

@@ -26,7 +26,8 @@ from ..plugins.params import ParamOwner, param_table
 from ..plugins.props import IOR, ROUGHNESS
 from .base import BSDF_TYPES, BSDFSample, BSDFType, GLOSSY, REFLECTION, SPECULAR, TRANSMISSION
 from .fresnel import fresnel_dielectric, lookup_ior, reflect, reflect_about, refract, refract_about
-from .microfacet import BECKMANN, GGX, Microfacet, VariantTable
+from .microfacet import (BECKMANN, GGX, REGULARIZED_ALPHA, REGULARIZED_VARIANT, Microfacet, VariantTable,
+                         regularized_alpha)
 
 _NO_TEXTURE = 0xFFFFFFFF
 
@@ -240,6 +241,57 @@ class _Dielectric(BSDFType):
         n = dr.width(wo)
         return dr.zeros(mi.Spectrum, n), dr.zeros(mi.Float, n)
 
+    # -- the microfacet interface (roughdielectric's, and regularised smooth ones') ---------
+    # ``prm``: (eta, alpha_u, alpha_v, variant lane or None, VariantTable).
+    @staticmethod
+    def _distributions(variant, au, av, cos_i):
+        """(distribution, the one sampled from): widened for D cos sampling."""
+        kind, visible = variant
+        d = Microfacet(kind, au, av, visible)
+        if visible:
+            return d, d
+        s = 1.2 - 0.2 * dr.sqrt(dr.abs(cos_i))
+        return d, Microfacet(kind, au * s, av * s, False)
+
+    def _eval_pdf(self, ctx, idx, prm, wo, active):
+        eta, au, av, var, table = prm
+        wi = ctx.si.wi
+        cos_i = wi.z
+
+        def micro(m):
+            def per_variant(variant):
+                d, sd = self._distributions(variant, au, av, cos_i)
+                return d.D(m) * d.G(wi, wo, m), sd.pdf(dr.mulsign(wi, cos_i), m)
+            return table.per_variant(var, per_variant)
+
+        val, pdf, is_r, ok = rough_dielectric_eval(wi, wo, eta, micro)
+        ok &= active
+        value = self._lobe_weight(ctx, idx, is_r, val, val, ok)
+        return dr.select(ok, value, 0.0), dr.select(ok, pdf, 0.0)
+
+    def _sample(self, ctx, idx, prm, u1, u2, active) -> BSDFSample:
+        eta, au, av, var, table = prm
+        wi = ctx.si.wi
+        cos_i = wi.z
+
+        def sample_m(wi_up, u):
+            return table.per_variant(var, lambda v: self._distributions(v, au, av, cos_i)[1].sample(wi_up, u))
+
+        def weight_m(wo, m, d_i):
+            def per_variant(variant):
+                d, sd = self._distributions(variant, au, av, cos_i)
+                if variant[1]:
+                    # D G1(wi) |wi.m| / |cos_i| cancels against the visible-normal density.
+                    return (d.G1(wo, m),)
+                return (d.G(wi, wo, m) * dr.abs(d_i) / (dr.abs(cos_i) * m.z) * (d.D(m) / sd.D(m)),)
+            return table.per_variant(var, per_variant)[0]
+
+        wo, pdf, w, sel_r, eta_it, ok = rough_dielectric_sample(wi, eta, sample_m, weight_m, u1, u2)
+        ok &= active
+        spec = self._lobe_weight(ctx, idx, sel_r, w, w, ok)
+        return BSDFSample(wo, dr.select(ok, pdf, 0.0), dr.select(sel_r, 1.0, eta_it), mi.Bool(False),
+                          dr.select(ok, spec, 0.0), self._terminates(idx, active))
+
 
 @BSDF_TYPES.register("dielectric")
 class SmoothDielectric(_Dielectric):
@@ -259,14 +311,31 @@ class SmoothDielectric(_Dielectric):
 
     name = "dielectric"
     flags = REFLECTION | TRANSMISSION | SPECULAR
+    regularizes_to_glossy = True
 
     def sample(self, ctx, idx, u1, u2, active) -> BSDFSample:
         wi = ctx.si.wi
         eta = self._eta_of(ctx, idx, active)
         wo, pdf, w, sel_r, eta_it, _ = smooth_dielectric_sample(wi, eta, u1)
         weight = self._lobe_weight(ctx, idx, sel_r, w, w, active)
-        return BSDFSample(wo, dr.select(active, pdf, 0.0), dr.select(sel_r, 1.0, eta_it), mi.Bool(True),
-                          dr.select(active & (pdf > 0), weight, 0.0), self._terminates(idx, active))
+        bs = BSDFSample(wo, dr.select(active, pdf, 0.0), dr.select(sel_r, 1.0, eta_it), mi.Bool(True),
+                        dr.select(active & (pdf > 0), weight, 0.0), self._terminates(idx, active))
+        if ctx.regularizing:     # pbrt-v4's regularised interface: a rough one of alpha 0.1
+            reg = active & ctx.regularize
+            bs = dr.select(reg, self._sample(ctx, idx, self._regularized(eta), u1, u2, reg), bs)
+        return bs
+
+    def eval_pdf(self, ctx, idx, wo, active):
+        if not ctx.regularizing:
+            return _Dielectric.eval_pdf(self, ctx, idx, wo, active)
+        reg = active & ctx.regularize
+        f, pdf = self._eval_pdf(ctx, idx, self._regularized(self._eta_of(ctx, idx, reg)), wo, reg)
+        return dr.select(reg, f, 0.0), dr.select(reg, pdf, 0.0)
+
+    @staticmethod
+    def _regularized(eta):
+        return (eta, mi.Float(REGULARIZED_ALPHA), mi.Float(REGULARIZED_ALPHA), None,
+                VariantTable([REGULARIZED_VARIANT]))
 
 
 @BSDF_TYPES.register("thindielectric")
@@ -365,7 +434,8 @@ class RoughDielectric(_Dielectric):
 
     # -- per-hit parameters ----------------------------------------------------------
     def _params(self, ctx, idx, active):
-        """(eta, alpha_u, alpha_v, variant index or None) at this hit."""
+        """(eta, alpha_u, alpha_v, variant index or None, variant table) at this hit
+        (regularised where the context says so)."""
         eta = self._eta_of(ctx, idx, active)
         uv, lam = ctx.si, ctx.wl.lambda_
         au = self.textures.eval(dr.gather(mi.UInt32, self.alpha_u, idx, active), uv, lam, active, illuminant=False,
@@ -373,60 +443,9 @@ class RoughDielectric(_Dielectric):
         av = (self.textures.eval(dr.gather(mi.UInt32, self.alpha_v, idx, active), uv, lam, active, illuminant=False,
                                  reach=self.alpha_reach[1])[0]
               if self.anisotropic else au)
-        return eta, au, av, self.variant_table.lane(idx, active)
-
-    @staticmethod
-    def _distributions(variant, au, av, cos_i):
-        """(distribution, the one sampled from): widened for D cos sampling."""
-        kind, visible = variant
-        d = Microfacet(kind, au, av, visible)
-        if visible:
-            return d, d
-        s = 1.2 - 0.2 * dr.sqrt(dr.abs(cos_i))
-        return d, Microfacet(kind, au * s, av * s, False)
-
-    def _per_variant(self, var, fn):
-        return self.variant_table.per_variant(var, fn)
-
-    # -- kernels ---------------------------------------------------------------------
-    def _eval_pdf(self, ctx, idx, prm, wo, active):
-        eta, au, av, var = prm
-        wi = ctx.si.wi
-        cos_i = wi.z
-
-        def micro(m):
-            def per_variant(variant):
-                d, sd = self._distributions(variant, au, av, cos_i)
-                return d.D(m) * d.G(wi, wo, m), sd.pdf(dr.mulsign(wi, cos_i), m)
-            return self._per_variant(var, per_variant)
-
-        val, pdf, is_r, ok = rough_dielectric_eval(wi, wo, eta, micro)
-        ok &= active
-        value = self._lobe_weight(ctx, idx, is_r, val, val, ok)
-        return dr.select(ok, value, 0.0), dr.select(ok, pdf, 0.0)
-
-    def _sample(self, ctx, idx, prm, u1, u2, active) -> BSDFSample:
-        eta, au, av, var = prm
-        wi = ctx.si.wi
-        cos_i = wi.z
-
-        def sample_m(wi_up, u):
-            return self._per_variant(var, lambda v: self._distributions(v, au, av, cos_i)[1].sample(wi_up, u))
-
-        def weight_m(wo, m, d_i):
-            def per_variant(variant):
-                d, sd = self._distributions(variant, au, av, cos_i)
-                if variant[1]:
-                    # D G1(wi) |wi.m| / |cos_i| cancels against the visible-normal density.
-                    return (d.G1(wo, m),)
-                return (d.G(wi, wo, m) * dr.abs(d_i) / (dr.abs(cos_i) * m.z) * (d.D(m) / sd.D(m)),)
-            return self._per_variant(var, per_variant)[0]
-
-        wo, pdf, w, sel_r, eta_it, ok = rough_dielectric_sample(wi, eta, sample_m, weight_m, u1, u2)
-        ok &= active
-        spec = self._lobe_weight(ctx, idx, sel_r, w, w, ok)
-        return BSDFSample(wo, dr.select(ok, pdf, 0.0), dr.select(sel_r, 1.0, eta_it), mi.Bool(False),
-                          dr.select(ok, spec, 0.0), self._terminates(idx, active))
+        if ctx.regularizing:
+            au, av = regularized_alpha(au, ctx.regularize), regularized_alpha(av, ctx.regularize)
+        return eta, au, av, self.variant_table.lane(idx, active), self.variant_table
 
     def eval_pdf(self, ctx, idx, wo, active):
         return self._eval_pdf(ctx, idx, self._params(ctx, idx, active), wo, active)

@@ -15,6 +15,16 @@ from ..sampling import square_to_uniform_disk_concentric
 from ..spectrum import clamp_keep_grad
 
 GGX, BECKMANN = "ggx", "beckmann"
+# pbrt-v4's regularised roughness of smooth interfaces (alpha 0 -> clamp(0, 0.1, 0.3)),
+# and the distribution they are given (pbrt-v4 has Trowbridge-Reitz only).
+REGULARIZED_ALPHA = 0.1
+REGULARIZED_VARIANT = (GGX, True)
+
+
+def regularized_alpha(alpha, mask):
+    """pbrt-v4's ``TrowbridgeReitzDistribution::Regularize`` where ``mask``: a roughness
+    below 0.3 becomes clamp(2 alpha, 0.1, 0.3)."""
+    return dr.select(mask & (alpha < 0.3), dr.clip(2.0 * alpha, REGULARIZED_ALPHA, 0.3), alpha)
 
 
 class Microfacet:

@@ -4,6 +4,12 @@ Both wrap one BSDF and evaluate it in a perturbed frame, expressed in the unpert
 local shading frame: directions are rotated into it, a direction on the other side of the
 unperturbed and perturbed surfaces gets nothing (no light leaks), and Estevez et al.'s
 shadowing term (Ray Tracing Gems, 2019) softens the terminator.
+
+Bump mapping takes any texture as its height field h: a raw ``bitmap`` is differentiated
+exactly (the gradient of its bilinear interpolation: Mitsuba's ``eval_1_grad``), any
+other texture (procedural, ``imagemap``, combinators) by forward differences at shifted
+points as pbrt-v4's ``BumpMap`` does (:func:`height_gradient`). One frame construction
+(:func:`bumpmap_frame`) serves both, and pbrt-v4's material ``displacement``.
 """
 
 from __future__ import annotations
@@ -13,8 +19,13 @@ import mitsuba as mi
 
 from ..plugins.props import SceneError
 from ..textures import Bitmap, load_spectrum
+from ..textures.procedural import footprint, uv_differentials
 
-NORMAL, BUMP = 1, 2
+# Perturbation kinds: a normal map, a bump map of a raw bitmap (exact gradient), a bump
+# map of any other texture (forward differences).
+NORMAL, BUMP, BUMP_DIFFERENCED = 1, 2, 3
+# pbrt-v4's finite-difference step in u and v where the pixel footprint gives none.
+DEFAULT_STEP = 0.0005
 
 
 def _frame_from_normal(n, s_hint):
@@ -52,6 +63,34 @@ def bumpmap_frame(si, grad_u, grad_v, flip_invalid: bool):
     return _frame_from_normal(n, si.to_local(si.dp_du))
 
 
+def height_gradient(textures, slot, si, lam, active, reach=None):
+    """(dh/du, dh/dv) of height texture ``slot`` at ``si`` by forward differences
+    (pbrt-v4's ``BumpMap``): h at the point shifted by du along dp/du with its uv shifted
+    by (du, 0), likewise for v, minus h at the point, over the step. The steps are half
+    the sum of |du/dx| and |du/dy| (|dv/dx|, |dv/dy|) of the render's pixel footprint,
+    DEFAULT_STEP where that is 0 (no footprint, or a degenerate parametrisation). h is
+    the texture's value at the first sampled wavelength (a float texture's value)."""
+    dpdx, dpdy = footprint(textures, si, active)
+    dudx, dudy, dvdx, dvdy = uv_differentials(si, dpdx, dpdy)
+    du = 0.5 * (dr.abs(dudx) + dr.abs(dudy))
+    dv = 0.5 * (dr.abs(dvdx) + dr.abs(dvdy))
+    du = dr.select(du > 0, du, DEFAULT_STEP)
+    dv = dr.select(dv > 0, dv, DEFAULT_STEP)
+
+    def h(s):
+        return textures.eval(slot, s, lam, active, illuminant=False, reach=reach)[0]
+
+    def shifted(step, dp, duv):
+        s = mi.SurfaceInteraction3f(si)
+        s.p = si.p + dp * step
+        s.uv = si.uv + duv * step
+        return s
+
+    h0 = h(si)
+    return ((h(shifted(du, si.dp_du, mi.Vector2f(1.0, 0.0))) - h0) / du,
+            (h(shifted(dv, si.dp_dv, mi.Vector2f(0.0, 1.0))) - h0) / dv)
+
+
 def shadow_terminator(n_local, wo):
     """Estevez et al.'s shadowing term for a perturbed normal (in the unperturbed frame)."""
     tan2_n = dr.maximum(1.0 - n_local.z * n_local.z, 0.0) / (n_local.z * n_local.z)
@@ -62,7 +101,8 @@ def shadow_terminator(n_local, wo):
 
 def parse(loader, props, bsdf_like):
     """(kind, texture slot, scale, flip_invalid, shadowing, nested BSDF key) of a
-    normalmap/bumpmap dict."""
+    normalmap/bumpmap dict. A bump map's height texture may be any texture: a raw bitmap
+    is differentiated exactly (BUMP), any other by forward differences (BUMP_DIFFERENCED)."""
     kind = NORMAL if props.type == "normalmap" else BUMP
     flip = props.bool("flip_invalid_normals", True)
     shadow = props.bool("use_shadowing_function", True)
@@ -80,12 +120,18 @@ def parse(loader, props, bsdf_like):
         if len(texs) != 1:
             raise props.error(None, f"bumpmap takes exactly one nested (height) texture, got {len(texs)}")
         tex_key = texs[0]
-    slot = load_spectrum(loader, props.raw(tex_key), props.key(tex_key), emitter=False, unbounded=True)
+    slot = load_spectrum(loader, props.raw(tex_key), props.key(tex_key), emitter=False, unbounded=True,
+                         scalar=kind == BUMP)
     tex = loader.textures.items[slot]
-    if not isinstance(tex, Bitmap):
+    if kind == BUMP and not isinstance(tex, Bitmap):
+        kind = BUMP_DIFFERENCED
+        loader.textures.mark_differenced(slot)
+    elif not isinstance(tex, Bitmap):
         raise props.error(tex_key, f"{props.type} needs a bitmap texture, got {type(tex).__name__}")
-    loader.textures.mark_raw(slot)
+    else:
+        loader.textures.mark_raw(slot)
     return kind, slot, scale, flip, shadow, bsdfs[0]
 
 
-__all__ = ["NORMAL", "BUMP", "normalmap_frame", "bumpmap_frame", "shadow_terminator", "parse", "SceneError"]
+__all__ = ["NORMAL", "BUMP", "BUMP_DIFFERENCED", "normalmap_frame", "bumpmap_frame", "height_gradient",
+           "shadow_terminator", "parse", "SceneError"]

@@ -11,7 +11,7 @@ import warnings
 import drjit as dr
 import mitsuba as mi
 
-from ..bsdfs.base import ShadingContext
+from ..bsdfs.base import ShadingContext, shading_context
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..spectrum import first_only
 from . import volume
@@ -58,6 +58,8 @@ class VolPathIntegrator(_MediumAware):
                                           weighted by the albedo sigma_s / sigma_t) or 'sample'
                                           (pbrt-v4's: absorb or scatter with probabilities
                                           sigma_a, sigma_s)
+    regularize           bool    false    pbrt-v4's BSDF regularisation after the path's first
+                                          non-specular bounce or medium scattering (see ``path``)
     ===================  ======  =======  =========================================================
 
     ``absorption``: both are unbiased. Mitsuba's weighting keeps a path alive through
@@ -78,6 +80,7 @@ class VolPathIntegrator(_MediumAware):
         self.light_sampler_type = props.string("light_sampler", "bvh", choices=LIGHT_SAMPLERS)
         self.max_null = props.int("max_null_collisions", 1 << 16, min=1)
         self.weight_absorption = props.string("absorption", "weight", choices=("weight", "sample")) == "weight"
+        self.regularize = props.bool("regularize", False)
         props.finish()
         self.capped = 0
 
@@ -207,6 +210,8 @@ class VolPathIntegrator(_MediumAware):
         cond = ConditionalState(r_u=(mi.Spectrum(1.0), has_media), n_null=(mi.UInt32(0), has_media),
                                 medium=(mi.UInt32(self._medium), has_media))
         cond_state = cond.state
+        # pbrt-v4's regularisation: on after the first non-specular bounce (state only with it)
+        nonspecular = mi.Bool(False) if self.regularize else None
         rng_state = rng.loop_state()
 
         while dr.hint(active, label="volpath", exclude=[rng, wl, cond]):
@@ -266,8 +271,8 @@ class VolPathIntegrator(_MediumAware):
                 rs_sample = rs | lobe
 
             # -- next-event estimation from the vertex (surface or medium point) ----------
-            ctx = ShadingContext(si, wl)
-            smooth = rs & bsdfs.smooth(bsdf_id, rs)
+            ctx = shading_context(si, wl, nonspecular)
+            smooth = rs & bsdfs.smooth(bsdf_id, rs, nonspecular)
             nee = smooth | sc
             ref = volume.nee_reference(si, sc, p_sc)
             u_light = rng.next_float32()
@@ -312,6 +317,8 @@ class VolPathIntegrator(_MediumAware):
             prev_p[cont] = ref.p
             prev_n[cont] = ref.n
             prev_delta[cont] = delta_next
+            if dr.hint(nonspecular is not None, mode="scalar"):
+                nonspecular |= cont & ~delta_next     # a glossy or diffuse bounce, or a medium scattering
             ray, medium = volume.next_ray(scene, shape, si, ray, medium, wi_next, p_sc, sc, cont, rs, skip)
             depth[at_vertex] = depth + 1
 

@@ -47,6 +47,8 @@ from ..integrators import INTEGRATORS
 from ..lights import LIGHT_TYPES
 from ..lights.goniometric import equal_area_sphere_to_square
 from ..media.mediumset import MEDIUM_TYPES
+from ..media.presets import MEASURED_SCATTERING, measured_scattering
+from ..plugins.props import did_you_mean
 from ..spectrum import CIE_Y_INTEGRAL, LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, blackbody, cie_tables_np, xyz_to_srgb
 from ..textures import TEXTURE_TYPES
 from .pbrt_tokens import Directive, Param, read_directives, resolve
@@ -1171,11 +1173,9 @@ class PBRTScene:
 
     def material(self, p: _Params, t: str) -> dict:
         b = self._material(p, t)
-        for k in ("displacement",):
-            if p.has(k):
-                p.p[k].used = True
-                self.unsupported(p.d, "material 'displacement' (bump mapping)")
         nm = p.string("normalmap")
+        if p.has("displacement"):
+            b = self._displacement(p, b, nm)
         full = resolve(nm, self.base) if nm else None
         if nm and not os.path.exists(full):
             self.missing(p.p["normalmap"].where, p.d.name, nm, full)
@@ -1187,6 +1187,23 @@ class PBRTScene:
             p.p["type"].used = True
         self.warn_unused(p, f"material {t!r}")
         return b
+
+    def _displacement(self, p: _Params, b: dict, normalmap) -> dict:
+        """pbrt-v4's material ``displacement`` (a float texture): pbr's ``bumpmap`` around
+        the BSDF (the texture differenced as pbrt-v4's BumpMap does). pbrt-v4 ignores it
+        when the material has a normal map; a constant displaces nothing."""
+        d = p.value("displacement", 0.0, kind="float")
+        if normalmap:
+            self.note(p.p["displacement"].where, "Material: 'displacement' is ignored with a 'normalmap' "
+                                                 "(pbrt-v4 uses the normal map)")
+            return b
+        if isinstance(d, float):
+            return b
+        if self.mitsuba and d.get("type") != "bitmap":
+            self.unsupported(p.d, "material 'displacement' of a non-image texture (Mitsuba's bumpmap takes "
+                                  "bitmaps): ignored")
+            return b
+        return {"type": "bumpmap", "displacement": d, "bsdf": b}
 
     def _material(self, p: _Params, t: str) -> dict:
         two = lambda b: {"type": "twosided", "bsdf": b}    # pbrt-v4's reflective BSDFs are two-sided
@@ -1306,11 +1323,25 @@ class PBRTScene:
         t = p.string("type")
         if t is None:
             raise p.error(None, "MakeNamedMedium needs \"string type\"")
-        if p.has("preset"):
-            self.unsupported(p.d, f"medium preset {p.string('preset')!r} (pbrt-v4's measured scattering tables)")
         common = {"sigma_a": p.value("sigma_a", 1.0, kind="unbounded"),
                   "sigma_s": p.value("sigma_s", 1.0, kind="unbounded"),
                   "scale": p.one("scale", "float", 1.0), "g": p.one("g", "float", 0.0)}
+        preset = p.string("preset")
+        if preset and t == "rgbgrid":
+            raise p.error("preset", "an rgbgrid takes its coefficients from its grids, not a preset")
+        if preset:
+            # pbrt-v4: the measured coefficients (mm^-1) replace sigma_a and sigma_s, times scale
+            if t != "homogeneous":
+                self.note(p.p["preset"].where, f"MakeNamedMedium: pbrt-v4 reads 'preset' for homogeneous media "
+                                               f"only (a {t} reports it unused); pbr applies it")
+            coeffs = measured_scattering(preset)
+            if coeffs is None:
+                raise p.error("preset", f"unknown preset {preset!r}{did_you_mean(preset, MEASURED_SCATTERING)} "
+                                        f"(pbrt-v4's: {', '.join(MEASURED_SCATTERING)})")
+            if p.has("sigma_a") or p.has("sigma_s"):
+                self.note(p.p["preset"].where, f"MakeNamedMedium: preset {preset!r} replaces sigma_a and sigma_s "
+                                               "(as in pbrt-v4)")
+            common["sigma_a"], common["sigma_s"] = ({"type": "rgb", "value": list(c)} for c in coeffs)
         le = p.value("Le", None, kind="illuminant")
         if le is not None:
             common["Le"] = le
@@ -1829,7 +1860,11 @@ class PBRTScene:
                     raise p.error("lightsampler", f"expected uniform, power or bvh, got {ls!r}")
                 out["light_sampler"] = ls
             if p.bool("regularize", False):
-                self.unsupported(d, "'regularize'")
+                if t in ("path", "volpath") and not self.mitsuba:
+                    out["regularize"] = True     # pbr's path and volpath regularise as pbrt-v4's
+                else:
+                    self.unsupported(d, f"'regularize' with {t!r}" + (" (Mitsuba's integrators do not regularise)"
+                                                                      if self.mitsuba else ""))
             for q in p.d.params:
                 if not q.used and t in ("bdpt", "mlt", "sppm", "ambientocclusion"):
                     q.used = True

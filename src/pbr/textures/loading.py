@@ -465,6 +465,64 @@ def _dots(loader, p, form, emitter, unbounded):
     return _pbrt_blend(loader, p, form, emitter, unbounded, procedural.DOTS, ("inside", 1.0), ("outside", 0.0), True)
 
 
+@TEXTURE_TYPES.register("bilerp")
+def _bilerp(loader, p, form, emitter, unbounded):
+    """``bilerp`` (pbrt-v4's): bilinear interpolation of four values over the 2D mapping's
+    (s, t): (1 - s)(1 - t) v00 + s (1 - t) v10 + (1 - s) t v01 + s t v11 (s, t are not
+    clamped: the plane extends beyond the unit square).
+
+    ========  =========  =========  =================================================
+    name      type       default    meaning
+    ========  =========  =========  =================================================
+    v00       texture    0          the value at (s, t) = (0, 0)
+    v10       texture    0          at (1, 0)
+    v01       texture    1          at (0, 1)
+    v11       texture    1          at (1, 1)
+    mapping   string     'uv'       2D mapping (see ``dots``), with ``uscale``,
+                                    ``vscale``, ``udelta``, ``vdelta``, ``v1``,
+                                    ``v2``, ``to_world``
+    ========  =========  =========  =================================================
+    """
+    v = {k: load_spectrum(loader, p.raw(k, d), p.key(k), emitter, unbounded)
+         for k, d in (("v00", 0.0), ("v10", 0.0), ("v01", 1.0), ("v11", 1.0))}
+    kw = _mapping_2d(p)
+    p.finish()
+    T = loader.textures
+    s = T.add(procedural.Procedural(p.path + ".s", procedural.COORD_S, **kw))
+    t = T.add(procedural.Procedural(p.path + ".t", procedural.COORD_T, **kw))
+    row0 = T.add(Composite(p.path + ".t0", OP_MIX, v["v00"], v["v10"], s))
+    row1 = T.add(Composite(p.path + ".t1", OP_MIX, v["v01"], v["v11"], s))
+    return T.add(Composite(p.path, OP_MIX, row0, row1, t))
+
+
+@TEXTURE_TYPES.register("directionmix")
+def _directionmix(loader, p, form, emitter, unbounded):
+    """``directionmix`` (pbrt-v4's): a |n . dir| tex1 + (1 - |n . dir|) tex2, n the
+    surface's geometric normal, ``dir`` normalised after ``to_world`` (tex1 where the
+    surface faces along dir, tex2 where it is parallel to it).
+
+    ========  =========  =========  ==============================================
+    name      type       default    meaning
+    ========  =========  =========  ==============================================
+    tex1      texture    0          where n is along dir
+    tex2      texture    1          where n is perpendicular to dir
+    dir       vector     (0, 1, 0)  the direction, in texture space
+    to_world  transform  identity   texture space -> world (applied to dir)
+    ========  =========  =========  ==============================================
+    """
+    x = load_spectrum(loader, p.raw("tex1", 0.0), p.key("tex1"), emitter, unbounded)
+    y = load_spectrum(loader, p.raw("tex2", 1.0), p.key("tex2"), emitter, unbounded)
+    d = np.asarray(p.transform("to_world"), np.float64)[:3, :3] @ np.asarray(p.vector3("dir", [0.0, 1.0, 0.0]),
+                                                                             np.float64)
+    if not np.linalg.norm(d) > 0:
+        raise p.error("dir", "the direction is zero (or the transform makes it so)")
+    p.finish()
+    d = tuple(float(c) for c in d / np.linalg.norm(d))
+    w = loader.textures.add(procedural.Procedural(p.path + ".weight", procedural.DIRECTION, procedural.MAP_UV,
+                                                  np.eye(4), planar=(d, (0.0, 1.0, 0.0))))
+    return loader.textures.add(Composite(p.path, OP_MIX, y, x, w))
+
+
 @TEXTURE_TYPES.register("imagemap")
 def _imagemap(loader, p, form, emitter, unbounded):
     """``imagemap`` (pbrt-v4's): an image with a MIP pyramid, filtered over the pixel

@@ -3,7 +3,9 @@
 Patterns (pbrt-v4's names and parameters): ``fbm``, ``wrinkled``, ``windy`` (float
 textures: the same value at every wavelength), ``marble`` (an sRGB albedo), ``dots`` and
 pbrt-v4's ``checkerboard`` (2D or 3D; both blend two child textures, so they load as a
-``mix`` whose amount is the pattern). Noise is Perlin's improved noise with pbrt-v4's
+``mix`` whose amount is the pattern); ``bilerp`` (two ``mix`` levels weighted by the
+mapping's s and t) and ``directionmix`` (a ``mix`` weighted by |n . dir|) load the same
+way. Noise is Perlin's improved noise with pbrt-v4's
 permutation table; ``fbm``/``wrinkled`` sum octaves up to the frequency the pixel
 footprint resolves (pbrt-v4's ``FBm``/``Turbulence``), and the checkerboard is
 box-filtered over the footprint (pbrt-v4's closed form), so both antialias.
@@ -54,8 +56,10 @@ NOISE_PERM = np.array([
     222, 114, 67, 29, 24, 72, 243, 141, 128, 195, 78, 66, 215, 61, 156, 180,
 ] * 2, dtype=np.uint32)
 
-# Pattern ids.
-FBM, WRINKLED, WINDY, MARBLE, DOTS, CHECKER2D, CHECKER3D = range(7)
+# Pattern ids. COORD_S, COORD_T: the 2D mapping's s or t (the weights of ``bilerp``);
+# DIRECTION: |n . dir| (the weight of ``directionmix``).
+FBM, WRINKLED, WINDY, MARBLE, DOTS, CHECKER2D, CHECKER3D, COORD_S, COORD_T, DIRECTION = range(10)
+MAPPED_2D = (DOTS, CHECKER2D, COORD_S, COORD_T)    # patterns over a 2D mapping
 PATTERNS = {"fbm": FBM, "wrinkled": WRINKLED, "windy": WINDY, "marble": MARBLE, "dots": DOTS}
 # Mapping ids.
 MAP_UV, MAP_SPHERICAL, MAP_CYLINDRICAL, MAP_PLANAR = range(4)
@@ -67,7 +71,8 @@ MARBLE_COLORS = [(.58, .58, .6), (.58, .58, .6), (.58, .58, .6), (.5, .5, .5), (
 
 class Procedural:
     """A procedural pattern (:data:`PATTERNS`, or a checkerboard's blend weight) over a
-    mapping. ``texture_from_world``: 4x4; ``uv``: (su, sv, du, dv); ``planar``: (v1, v2)."""
+    mapping. ``texture_from_world``: 4x4; ``uv``: (su, sv, du, dv); ``planar``: (v1, v2)
+    (DIRECTION: v1 is the world direction)."""
 
     kind = PROCEDURAL
 
@@ -97,7 +102,7 @@ def build_table(items: list) -> ProceduralTable:
 
 def static_info(items: list):
     """What the kernels trace: (patterns present, 2D mappings present, most octaves)."""
-    return ({t.pattern for t in items}, {t.mapping for t in items if t.pattern in (DOTS, CHECKER2D)},
+    return ({t.pattern for t in items}, {t.mapping for t in items if t.pattern in MAPPED_2D},
             max([t.octaves for t in items if t.pattern in (FBM, WRINKLED, MARBLE)] + [0]))
 
 
@@ -346,8 +351,12 @@ def evaluate(textures, i, uv, si, lam, active) -> mi.Spectrum:
             r = [1.5 * dr.maximum(dr.abs(tx[k]), dr.abs(ty[k])) for k in range(3)]
             w = 0.5 - 0.5 * _checker_bump(pt.x, r[0]) * _checker_bump(pt.y, r[1]) * _checker_bump(pt.z, r[2])
             value = dr.select(pattern == CHECKER3D, w, value)
-    if pats & {DOTS, CHECKER2D}:
+    if pats & set(MAPPED_2D):
         st, dsdx, dsdy, dtdx, dtdy = map_2d(T, i, mappings, uv, si, p, dpdx, dpdy, active)
+        if COORD_S in pats:
+            value = dr.select(pattern == COORD_S, st.x, value)
+        if COORD_T in pats:
+            value = dr.select(pattern == COORD_T, st.y, value)
         if DOTS in pats:
             value = dr.select(pattern == DOTS, dr.select(inside_polka_dot(perm, st), 0.0, 1.0), value)
         if CHECKER2D in pats:
@@ -355,6 +364,10 @@ def evaluate(textures, i, uv, si, lam, active) -> mi.Spectrum:
             dt = 1.5 * dr.maximum(dr.abs(dtdx), dr.abs(dtdy))
             w = 0.5 - 0.5 * _checker_bump(st.x, ds) * _checker_bump(st.y, dt)
             value = dr.select(pattern == CHECKER2D, w, value)
+    if DIRECTION in pats:   # pbrt-v4's DirectionMix weight: |n . dir|, n the geometric normal
+        n = si.n if si is not None else mi.Vector3f(0.0, 0.0, 1.0)
+        d = mi.Vector3f(*(dr.gather(mi.Float, a, i, active) for a in T.v1))
+        value = dr.select(pattern == DIRECTION, dr.abs(dr.dot(n, d)), value)
     out = mi.Spectrum(value)
     if rgb is not None:
         marble = spec.sigmoid_polynomial(spec.rgb_to_coeffs(rgb), lam)

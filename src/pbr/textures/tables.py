@@ -73,7 +73,7 @@ class ProceduralTable:
     variation: object = None
     m: object = None            # texture-from-world, 12 rows (3x4)
     uv: object = None           # su, sv, du, dv (planar: du, dv)
-    v1: object = None           # planar axes
+    v1: object = None           # planar axes (DIRECTION: v1 is the world direction)
     v2: object = None
     perm: object = None         # the noise permutation table (512 entries)
     marble: object = None       # marble's colour spline (3 Floats)

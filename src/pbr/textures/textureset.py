@@ -48,6 +48,7 @@ class TextureSet:
         # (camera, spp) of the render under way: the pixel footprint of procedural and
         # MIP-mapped textures (set by the integrator; None: no footprint, no filtering)
         self.footprint = None
+        self.differenced: list[int] = []   # height textures that bump maps difference
         self.mesh_data: list = []       # meshes read by mesh_attrs, their slots and
         self.mesh_uses: list = []       # triangles (set by meshattr.bind)
         self.mesh_geometry: dict = {}
@@ -68,8 +69,9 @@ class TextureSet:
 
     @property
     def needs_footprint(self) -> bool:
-        """Whether a texture filters over the pixel footprint (procedural or MIP-mapped)."""
-        return bool(self.procedurals or self.mipmaps)
+        """Whether a texture filters over the pixel footprint (procedural or MIP-mapped),
+        or a bump map differences a texture (its step is the footprint's)."""
+        return bool(self.procedurals or self.mipmaps or self.differenced)
 
     def param_owners(self) -> list:
         """Objects whose ``params`` are scene parameters (under ``<path>.<name>``): the
@@ -96,6 +98,12 @@ class TextureSet:
     def mark_raw(self, slot: int) -> None:
         """Bitmap ``slot`` is also read raw (a normal or bump map): build its raw texels."""
         self.items[slot].needs_raw = True
+
+    def mark_differenced(self, slot: int) -> None:
+        """``slot`` is a height field that a bump map differences (its finite-difference
+        step comes from the pixel footprint)."""
+        if slot not in self.differenced:
+            self.differenced.append(slot)
 
     def constant_value(self, slot: int) -> float:
         """A rough scalar magnitude of a constant (for light power estimates)."""
