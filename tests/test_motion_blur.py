@@ -1,0 +1,269 @@
+"""Moving shapes and instances (motion blur: ``to_world_end`` / ``transform_times`` on a
+shape or an instance; pbrt-v4's ``ActiveTransform`` around a ``Shape`` or an
+``ObjectInstance``), checked against values computed here without the renderer:
+
+* a black sphere moving in a straight line across a constant sky, seen by an
+  orthographic camera with a box filter: a pixel's value is the sky times the fraction
+  of (shutter time x pixel area) its rays miss the sphere; per point of the pixel the
+  blocked time is an interval in closed form (a quadratic in t), the pixel area is
+  integrated on a fine grid;
+* a black rectangle turning 120 degrees about the view axis (slerp: a constant angular
+  velocity): the same fraction on a fine grid of times;
+* a lit cube moving and turning above a floor under a point light: its shading and its
+  shadow equal the time average of static renders of the cube at stratified times
+  (pbr's static path, poses built here, not by pbr's interpolation);
+* a pbrt-v4 file with ``ActiveTransform EndTime`` around the sphere of the first case.
+
+Images are compared per pixel with :func:`pbr.validate.compare` (z-tests with a Sidak
+correction, and the whole image's mean)."""
+
+import math
+
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import pbr
+import pbr.scene.pbrt
+from pbr.scene.xml import XMLError
+from pbr.plugins.props import SceneError
+from pbr.validate import compare, estimate
+
+T = mi.ScalarTransform4f
+W, H, S = 32, 16, 2.0          # image size; the view spans x in [-S, S], y in [-S H / W, S H / W]
+
+
+def _view(objects: dict, spp: int = 64, max_depth: int = 2, sky: bool = True) -> dict:
+    """An orthographic camera at z = -5 looking toward +z (world x grows to the image's
+    left, y upward), a box filter, a constant sky of radiance 1."""
+    d = {"type": "scene", "integrator": {"type": "path", "max_depth": max_depth},
+         "cam": {"type": "orthographic", "to_world": T().look_at([0, 0, -5], [0, 0, 0], [0, 1, 0]) @ T().scale([S, S, 1]),
+                 "film": {"type": "hdrfilm", "width": W, "height": H, "rfilter": {"type": "box"}},
+                 "sampler": {"type": "independent", "sample_count": spp}}}
+    if sky:
+        d["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": 1.0}}
+    return {**d, **objects}
+
+
+def _pixel_points(k: int, mirror_x: bool = False):
+    """World (x, y) of k x k points per pixel (midpoints of a sub-grid): (H, W, k*k) arrays."""
+    u = (np.arange(W * k) + 0.5) / (W * k)
+    v = (np.arange(H * k) + 0.5) / (H * k)
+    x = S * (2 * u - 1) if mirror_x else S * (1 - 2 * u)
+    y = S * H / W * (1 - 2 * v)
+    X, Y = np.meshgrid(x, y)
+    to_px = lambda a: a.reshape(H, k, W, k).transpose(0, 2, 1, 3).reshape(H, W, k * k)  # noqa: E731
+    return to_px(X), to_px(Y)
+
+
+def _sphere_miss_fraction(c0, c1, r, k=24, mirror_x=False):
+    """Per pixel, the fraction of (time in [0, 1] x pixel area) in which a ray along z
+    misses a sphere of radius r whose centre moves from c0 to c1: |p - c0 - t v|^2 < r^2
+    is a quadratic a t^2 + b t + c < 0, the blocked time its interval clipped to [0, 1]."""
+    x, y = _pixel_points(k, mirror_x)
+    v = np.subtract(c1[:2], c0[:2])
+    px, py = x - c0[0], y - c0[1]
+    a = float(v @ v)
+    b = -2 * (px * v[0] + py * v[1])
+    c = px * px + py * py - r * r
+    disc = np.maximum(b * b - 4 * a * c, 0.0)
+    t1, t2 = (-b - np.sqrt(disc)) / (2 * a), (-b + np.sqrt(disc)) / (2 * a)
+    blocked = np.clip(np.minimum(t2, 1.0) - np.maximum(t1, 0.0), 0.0, 1.0)
+    return 1.0 - blocked.mean(axis=-1)
+
+
+def _rectangle_miss_fraction(a, b, turn_deg, k=12, steps=512):
+    """Per pixel, the fraction of (time x pixel area) in which a ray along z misses the
+    rectangle [-a, a] x [-b, b] turned by turn_deg * t about z at time t (times on a
+    midpoint grid of ``steps``)."""
+    x, y = _pixel_points(k)
+    miss = np.zeros(x.shape[:2])
+    for t in (np.arange(steps) + 0.5) / steps:
+        th = math.radians(turn_deg * t)
+        u = x * math.cos(th) + y * math.sin(th)          # the point in the rectangle's frame
+        w = -x * math.sin(th) + y * math.cos(th)
+        miss += ((np.abs(u) >= a) | (np.abs(w) >= b)).mean(axis=-1)
+    return miss / steps
+
+
+def _sky_level(spp=1024):
+    """The sky's image value per channel (a render without shapes but a far-away speck)
+    and the variance of that mean."""
+    d = _view({"speck": {"type": "sphere", "radius": 1e-3, "center": [0, 0, 50]}})
+    est = estimate(lambda seed, spp: pbr.render(pbr.load_dict(d), seed=seed, spp=spp), spp, batches=8, seed=7)
+    return est.mean.mean(axis=(0, 1)), est.image_mean_var
+
+
+def _check_against(d: dict, frac: np.ndarray, spp: int = 1024):
+    scene = pbr.load_dict(d)
+    est = estimate(lambda seed, spp: pbr.render(scene, seed=seed, spp=spp), spp, batches=16, seed=3)
+    sky, sky_var = _sky_level()
+    expect = frac[..., None] * sky
+    result = compare(est.mean, est.var, expect, frac[..., None] ** 2 * sky_var * np.ones(3),
+                     image_mean_var_a=est.image_mean_var)
+    assert result, result
+    return est.mean
+
+
+BLACK = {"type": "diffuse", "reflectance": 0.0}
+
+
+def test_moving_sphere_blocks_the_sky_for_its_time_fraction():
+    """A black sphere (radius 0.4) translating from (-1, 0.2) to (1, -0.2) during the
+    shutter [0, 1] darkens each pixel by the closed-form fraction of time it covers it."""
+    c0, c1, r = (-1.0, 0.2, 0.0), (1.0, -0.2, 0.0), 0.4
+    d = _view({"ball": {"type": "sphere", "radius": r, "to_world": T().translate(list(c0)),
+                        "to_world_end": T().translate(list(c1)), "bsdf": BLACK}})
+    _check_against(d, _sphere_miss_fraction(c0, c1, r))
+
+
+def test_rotating_rectangle_sweeps_its_turn():
+    """A black 2.4 x 0.6 rectangle turning 120 degrees about the view axis: the sweep
+    follows the rotation's direction and a constant angular velocity (slerp)."""
+    a, b, turn = 1.2, 0.3, 120.0
+    d = _view({"bar": {"type": "rectangle", "to_world": T().scale([a, b, 1]),
+                       "to_world_end": T().rotate([0, 0, 1], turn) @ T().scale([a, b, 1]), "bsdf": BLACK}})
+    frac = _rectangle_miss_fraction(a, b, turn)
+    mirrored = _rectangle_miss_fraction(a, b, -turn)
+    assert np.abs(frac - mirrored).max() > 0.3       # the expected image tells the direction
+    _check_against(d, frac)
+
+
+def _cube_pose(t):
+    """The cube's pose at time t, built directly: moving along x and turning 90 degrees
+    about (1, 1, 0) at a constant rate."""
+    return T().translate([-0.8 + 1.6 * t, 0.1, -1.5]) @ T().rotate([math.sqrt(0.5), math.sqrt(0.5), 0.0], 90.0 * t) @ T().scale(0.3)
+
+
+def _lit_floor(cube: dict, spp: int) -> dict:
+    d = _view({"floor": {"type": "rectangle", "to_world": T().scale([3, 3, 1]),
+                         "bsdf": {"type": "diffuse", "reflectance": 0.8}},
+               "cube": {"type": "cube", "bsdf": {"type": "diffuse", "reflectance": 0.5}, **cube},
+               "lamp": {"type": "point", "position": [0.3, 0.2, -4.0],
+                        "intensity": {"type": "rgb", "value": 20.0}}}, spp=spp, sky=False)
+    # Looking at the floor's front (+z side faces the camera at z = -5 after the flip).
+    d["floor"]["to_world"] = T().rotate([0, 1, 0], 180.0) @ T().scale([3, 3, 1])
+    return d
+
+
+def test_moving_cube_shading_and_shadow_equal_the_time_average():
+    """A diffuse cube above a floor under a point light, translating and turning during
+    the shutter: the image (the cube's faces shaded with their moving normals, its
+    shadow cast through shadow rays at each ray's time) equals the average of static
+    renders at stratified times (4 strata, one random shift per batch: an unbiased
+    estimate of the time integral)."""
+    strata, spp_static = 4, 64
+    moving = pbr.load_dict(_lit_floor({"to_world": _cube_pose(0.0), "to_world_end": _cube_pose(1.0)}, spp_static))
+    est = estimate(lambda seed, spp: pbr.render(moving, seed=seed, spp=spp), 16 * strata * spp_static,
+                   batches=16, seed=5)
+
+    def averaged(seed, spp):
+        shift = np.random.default_rng(seed).random()
+        imgs = [np.asarray(pbr.render(pbr.load_dict(_lit_floor({"to_world": _cube_pose((k + shift) / strata)},
+                                                               spp_static)),
+                                      seed=seed * strata + k, spp=spp_static), np.float64) for k in range(strata)]
+        return np.mean(imgs, axis=0)
+
+    ref = estimate(averaged, 16 * spp_static, batches=16, seed=9)
+    result = compare(est.mean, est.var, ref.mean, ref.var, image_mean_var_a=est.image_mean_var,
+                     image_mean_var_b=ref.image_mean_var)
+    assert result, result
+    # The shadow and the cube's streak are there (not a static cube, not no cube).
+    still = np.asarray(pbr.render(pbr.load_dict(_lit_floor({"to_world": _cube_pose(0.0)}, 256)), seed=1), np.float64)
+    assert np.abs(still - est.mean).max() > 0.2
+
+
+PBRT_SPHERE = """
+Scale -1 1 1
+LookAt 0 0 5  0 0 0  0 1 0
+Camera "orthographic" "float screenwindow" [-2 2 -1 1]
+Film "rgb" "integer xresolution" 32 "integer yresolution" 16
+Sampler "independent" "integer pixelsamples" 64
+Integrator "path" "integer maxdepth" 1
+PixelFilter "box"
+TransformTimes 0 2
+WorldBegin
+LightSource "infinite" "rgb L" [1 1 1]
+AttributeBegin
+Material "diffuse" "rgb reflectance" [0 0 0]
+Translate -1 0.2 0
+ActiveTransform EndTime
+Translate 2 -0.4 0
+ActiveTransform All
+Shape "sphere" "float radius" 0.4
+AttributeEnd
+ObjectBegin "tile"
+Shape "trianglemesh" "point3 P" [-0.2 -0.2 0  0.2 -0.2 0  0.2 0.2 0  -0.2 0.2 0] "integer indices" [0 1 2 0 2 3]
+ObjectEnd
+AttributeBegin
+Translate 0 -5 0
+ActiveTransform EndTime
+Rotate 90 0 0 1
+ActiveTransform All
+ObjectInstance "tile"
+AttributeEnd
+"""
+
+
+def test_pbrt_active_transform_moves_shapes_and_instances(tmp_path):
+    """pbrt-v4's ActiveTransform EndTime around a Shape gives the shape pbr's
+    ``to_world_end`` (built in its object space) and ``transform_times``; around an
+    ObjectInstance, the instance's. With TransformTimes 0 2 and pbrt-v4's default shutter
+    [0, 1] the sphere covers half its path: the image is the closed-form fraction for
+    the path to (0, 0) (pbrt's camera: world +x on the image's right)."""
+    path = tmp_path / "moving.pbrt"
+    path.write_text(PBRT_SPHERE)
+    d = pbr.scene.pbrt.to_dict(str(path))
+    ball = next(v for v in d.values() if isinstance(v, dict) and v.get("type") == "sphere")
+    assert ball["transform_times"] == [0.0, 2.0]
+    assert np.allclose(np.array(ball["to_world"].matrix)[:3, 3], [-1, 0.2, 0])
+    assert np.allclose(np.array(ball["to_world_end"].matrix)[:3, 3], [1, -0.2, 0])
+    inst = next(v for v in d.values() if isinstance(v, dict) and v.get("type") == "instance")
+    end = np.array(inst["to_world_end"].matrix)
+    assert np.allclose(end[:3, :3], [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-6) and np.allclose(end[:3, 3], [0, -5, 0])
+    frac = _sphere_miss_fraction((-1.0, 0.2, 0.0), (0.0, 0.0, 0.0), 0.4, mirror_x=True)
+    scene = pbr.load_file(str(path))
+    est = estimate(lambda seed, spp: pbr.render(scene, seed=seed, spp=spp), 1024, batches=16, seed=3)
+    sky = est.mean[frac == 1.0].mean(axis=0)      # the sky's level from the pixels never covered
+    result = compare(est.mean, est.var, frac[..., None] * sky, np.zeros_like(est.var),
+                     image_mean_var_a=est.image_mean_var)
+    assert result, result
+    with pytest.raises(XMLError, match="animated transforms of shapes .* Mitsuba 3"):
+        pbr.scene.pbrt.to_dict(str(path), mitsuba=True)
+
+
+def test_moving_shapes_errors():
+    """Clear errors: emitters on moving shapes, motion inside a shapegroup, integrators
+    that trace light paths or static geometry, a bad end transform or times."""
+    film = {"type": "hdrfilm", "width": 8, "height": 8}
+    base = {"type": "scene", "cam": {"type": "perspective", "film": film}}
+    moving = {"type": "sphere", "to_world_end": T().translate([1, 0, 0])}
+    with pytest.raises(SceneError, match=r"scene.s.emitter: moving shapes .* cannot carry emitters"):
+        pbr.load_dict({**base, "s": {**moving, "emitter": {"type": "area"}}})
+    with pytest.raises(SceneError, match=r"scene.g.s.to_world_end: shapes inside a shapegroup cannot move"):
+        pbr.load_dict({**base, "g": {"type": "shapegroup", "s": moving},
+                       "i": {"type": "instance", "shapegroup": {"type": "ref", "id": "g"}}})
+    for integrator in ("ptracer", "bdpt", "radiosity"):
+        with pytest.raises(SceneError, match=rf"the '{integrator}' integrator does not support moving shapes"):
+            pbr.load_dict({**base, "integrator": {"type": integrator}, "l": {"type": "constant"}, "s": moving})
+    with pytest.raises(SceneError, match=r"scene.s.transform_times: the end time must exceed"):
+        pbr.load_dict({**base, "s": {**moving, "transform_times": [1.0, 0.0]}})
+    with pytest.raises(SceneError, match=r"scene.s.to_world_end: expected an invertible affine"):
+        pbr.load_dict({**base, "s": {**moving, "to_world_end": np.zeros((4, 4))}})
+    # An end transform equal to the start: a static shape, in Mitsuba's scene as before.
+    scene = pbr.load_dict({**base, "s": {"type": "sphere", "to_world_end": T()}})
+    assert not scene.geometry.moving and len(scene.shapes()) == 1
+
+
+def test_moving_shape_bounds_cover_the_motion():
+    """The scene's bounding box (which sizes infinite and distant lights) holds a moving
+    shape over its whole motion: a unit sphere moving from x = 0 to x = 10 and a turning
+    bar (a point at distance 2 from the axis passes through y = 2 half-way)."""
+    film = {"type": "hdrfilm", "width": 8, "height": 8}
+    scene = pbr.load_dict({"type": "scene", "cam": {"type": "perspective", "film": film},
+                           "s": {"type": "sphere", "to_world_end": T().translate([10, 0, 0])},
+                           "bar": {"type": "cube", "to_world": T().scale([2, 0.01, 0.01]),
+                                   "to_world_end": T().rotate([0, 0, 1], 180.0) @ T().scale([2, 0.01, 0.01])}})
+    bb = scene.bbox()
+    assert bb.min[0] <= -2 and bb.max[0] >= 11 and bb.max[1] >= 2 - 1e-3 and bb.min[1] <= -1
+    assert bb.max[0] < 11.5 and bb.max[1] < 2.5
