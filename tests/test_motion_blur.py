@@ -25,7 +25,7 @@ import pytest
 
 import pbr
 import pbr.scene.pbrt
-from pbr.scene.xml import XMLError
+from pbr.scene.xml import XMLError, to_xml
 from pbr.plugins.props import SceneError
 from pbr.validate import compare, estimate
 
@@ -228,6 +228,12 @@ def test_pbrt_active_transform_moves_shapes_and_instances(tmp_path):
     result = compare(est.mean, est.var, frac[..., None] * sky, np.zeros_like(est.var),
                      image_mean_var_a=est.image_mean_var)
     assert result, result
+    # Saved as Mitsuba-style XML (transform_times as a string "t0 t1") and read back: the same image.
+    xml = tmp_path / "moving.xml"
+    xml.write_text(to_xml(d))
+    again = pbr.load_file(str(xml))
+    assert len(again.geometry.movers) == 2
+    assert np.array_equal(np.asarray(pbr.render(again, seed=1, spp=16)), np.asarray(pbr.render(scene, seed=1, spp=16)))
     with pytest.raises(XMLError, match="animated transforms of shapes .* Mitsuba 3"):
         pbr.scene.pbrt.to_dict(str(path), mitsuba=True)
 

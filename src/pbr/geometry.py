@@ -59,9 +59,11 @@ def _to_mi_transform(m: np.ndarray):
 def read_motion(props: Props, m0: np.ndarray, end: str = "to_world_end"):
     """The :class:`~.motion.AnimatedTransform` from ``m0`` (the plugin's ``to_world``) at
     ``transform_times[0]`` to ``end`` at ``transform_times[1]`` (pbrt-v4's
-    ``TransformTimes``; default [0, 1]), or None where ``end`` is not given or equals
+    ``TransformTimes``; default [0, 1]; in XML a string "t0 t1"), or None where ``end`` is not given or equals
     ``m0``. Cameras, shapes and instances read their motion here."""
     times = props.raw("transform_times", [0.0, 1.0])
+    if isinstance(times, str):         # from XML: <string name="transform_times" value="0 1"/>
+        times = times.replace(",", " ").split()
     try:
         t0, t1 = (float(t) for t in np.asarray(times, np.float64).reshape(2))
     except (TypeError, ValueError):
