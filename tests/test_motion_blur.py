@@ -273,3 +273,24 @@ def test_moving_shape_bounds_cover_the_motion():
     bb = scene.bbox()
     assert bb.min[0] <= -2 and bb.max[0] >= 11 and bb.max[1] >= 2 - 1e-3 and bb.min[1] <= -1
     assert bb.max[0] < 11.5 and bb.max[1] < 2.5
+
+
+def test_shapes_with_one_motion_share_a_mover():
+    """Moving shapes with the same motion (the parts of one animated object: the same
+    ``to_world`` and ``to_world_end``) are one Mitsuba scene, traced once per ray; another
+    motion is another. Each hit still maps to its own shape (its BSDF): a red and a green
+    ball moving together."""
+    end = T().translate([0.5, 0, 0])
+    red, green = ({"type": "diffuse", "reflectance": {"type": "rgb", "value": c}} for c in ([0.8, 0, 0], [0, 0.8, 0]))
+    d = _view({"left": {"type": "sphere", "center": [0.5, 0, 0], "radius": 0.3, "to_world_end": end, "bsdf": red},
+               "right": {"type": "sphere", "center": [-0.5, 0, 0], "radius": 0.3, "to_world_end": end, "bsdf": green},
+               "other": {"type": "sphere", "radius": 0.1, "to_world": T().translate([0, 0.8, 0]),
+                         "to_world_end": T().translate([0, 0.9, 0])}})
+    scene = pbr.load_dict(d)
+    assert len(scene.geometry.movers) == 2
+    img = np.asarray(pbr.render(scene, spp=64, seed=1), np.float64)
+    # World x > 0 is the image's left: the red ball there (x from 0.5 to 1: columns 8-12
+    # always covered), the green one right of it (x from -0.5 to 0: columns 16-20).
+    row = img[H // 2]
+    red_px, green_px = row[10], row[18]
+    assert red_px[0] > 3 * red_px[1] and green_px[1] > 3 * green_px[0], (red_px, green_px)

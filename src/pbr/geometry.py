@@ -257,7 +257,8 @@ class Geometry:
     Motion blur (pbrt-v4's animated primitives): ``motions`` maps top-level pbr shapes
     to their :class:`~.motion.AnimatedTransform`. Mitsuba 3.9 builds every shape and
     instance at one time, so each moving shape (in its object space) and each shape group
-    of a moving instance (in its own space) is a Mitsuba scene of its own, a *mover*:
+    of a moving instance (in its own space) is a Mitsuba scene of its own, a *mover*
+    (moving shapes with the same motion share one):
     a ray is taken into its space at the ray's time, intersected there, and the nearest
     of the static hit and the movers' hits is taken back to world space. A scene without
     movers traces exactly the queries it traced before."""
@@ -285,9 +286,13 @@ class Geometry:
             # Movers: (Mitsuba scene in the moving thing's space, AnimatedTransform).
             self.movers, spaces = [], {}
             moving = [(i, build_shape(shapes[i])) for i in sorted(motions)]
+            # Shapes with the same motion (e.g. the meshes of one animated object) share one.
+            same: dict[tuple, dict] = {}
             for i, obj in moving:
-                self.movers.append((mi.load_dict({"type": "scene", f"shape_{i:06d}": obj}, optimize=False),
-                                    motions[i]))
+                same.setdefault(motions[i].key, {})[f"shape_{i:06d}"] = (obj, motions[i])
+            for objs in same.values():
+                scene = mi.load_dict({"type": "scene", **{k: o for k, (o, _) in objs.items()}}, optimize=False)
+                self.movers.append((scene, next(iter(objs.values()))[1]))
             for g, _, motion in instances:
                 if motion is not None:
                     if g not in spaces:

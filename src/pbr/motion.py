@@ -64,6 +64,8 @@ class AnimatedTransform:
             q1 = -q1
         self.q0, self.q1 = q0, q1
         self.theta = math.acos(min(1.0, float(np.dot(q0, q1))))
+        # Equal keys: the same motion (what moving shapes are grouped by).
+        self.key = (self.m0.tobytes(), self.m1.tobytes(), self.t0, self.t1)
 
     def at(self, time):
         """(rows of the linear part, origin) at ``time`` (a Dr.Jit Float or a Python
