@@ -11,7 +11,8 @@ and units (docs/pbrt.md lists every mapping and what is approximated or left out
 * Cameras: pbrt's camera space is left-handed (x to the right on the image); Mitsuba's
   is right-handed with x to the left, so ``to_world = inverse(CTM) @ Scale(-1, 1, 1)``;
   ``fov`` is the field of view of the shorter image axis (Mitsuba's ``fov_axis``
-  'smaller'). A moving camera gets ``to_world_end`` and ``transform_times``.
+  'smaller'). A moving camera gets ``to_world_end`` and ``transform_times``; so do moving
+  shapes (built in their object space) and object instances (``ActiveTransform``).
 * Filters, films, cameras and textures that pbr registers under pbrt-v4's names
   (``gaussian`` of radius 1.5, ``mitchell``, ``sinc``, ``triangle``; ``rgb`` with its
   pixel sensor, ``gbuffer``, ``spectral``; ``spherical``, ``realistic``; ``imagemap``,
@@ -756,9 +757,10 @@ class PBRTScene:
         t, = self.args(d, 1, allow_params=True)
         p = _Params(d, self, self.state.attributes["shape"])
         moving = self.animated()
-        if moving and (self.mitsuba or self.current_object is not None or self.state.area is not None):
+        if moving and (self.mitsuba or self.current_object is not None or self.state.area is not None or t == "curve"):
             why = ("in a dict for Mitsuba 3 (mitsuba=True)" if self.mitsuba else "inside ObjectBegin/ObjectEnd "
-                   "(an animated ObjectInstance moves)" if self.current_object is not None else "with an area light")
+                   "(an animated ObjectInstance moves)" if self.current_object is not None else "of curves"
+                   if t == "curve" else "with an area light")
             self.unsupported(d, f"animated transforms of shapes (ActiveTransform EndTime) {why}: "
                                 f"the start transform is used")
             moving = False
