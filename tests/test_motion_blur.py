@@ -14,8 +14,9 @@ shape or an instance; pbrt-v4's ``ActiveTransform`` around a ``Shape`` or an
   (pbr's static path, poses built here, not by pbr's interpolation);
 * a pbrt-v4 file with ``ActiveTransform EndTime`` around the sphere of the first case.
 
-Images are compared per pixel with :func:`pbr.validate.compare` (z-tests with a Sidak
-correction, and the whole image's mean)."""
+Images are compared per pixel with :func:`pbr.validate.compare` (tests with a Sidak
+correction, Student's t for variances measured over 16 batches, and the whole image's
+mean)."""
 
 import math
 
@@ -27,7 +28,7 @@ import pbr
 import pbr.scene.pbrt
 from pbr.scene.xml import XMLError, to_xml
 from pbr.plugins.props import SceneError
-from pbr.validate import compare, estimate
+from pbr.validate import compare, estimate, welch_dof
 
 T = mi.ScalarTransform4f
 W, H, S = 32, 16, 2.0          # image size; the view spans x in [-S, S], y in [-S H / W, S H / W]
@@ -100,7 +101,7 @@ def _check_against(d: dict, frac: np.ndarray, spp: int = 1024):
     sky, sky_var = _sky_level()
     expect = frac[..., None] * sky
     result = compare(est.mean, est.var, expect, frac[..., None] ** 2 * sky_var * np.ones(3),
-                     image_mean_var_a=est.image_mean_var)
+                     image_mean_var_a=est.image_mean_var, dof=est.batches - 1)
     assert result, result
     return est.mean
 
@@ -166,7 +167,7 @@ def test_moving_cube_shading_and_shadow_equal_the_time_average():
 
     ref = estimate(averaged, 16 * spp_static, batches=16, seed=9)
     result = compare(est.mean, est.var, ref.mean, ref.var, image_mean_var_a=est.image_mean_var,
-                     image_mean_var_b=ref.image_mean_var)
+                     image_mean_var_b=ref.image_mean_var, dof=welch_dof(est.var, est.batches, ref.var, ref.batches))
     assert result, result
     # The shadow and the cube's streak are there (not a static cube, not no cube).
     still = np.asarray(pbr.render(pbr.load_dict(_lit_floor({"to_world": _cube_pose(0.0)}, 256)), seed=1), np.float64)
@@ -226,7 +227,7 @@ def test_pbrt_active_transform_moves_shapes_and_instances(tmp_path):
     est = estimate(lambda seed, spp: pbr.render(scene, seed=seed, spp=spp), 1024, batches=16, seed=3)
     sky = est.mean[frac == 1.0].mean(axis=0)      # the sky's level from the pixels never covered
     result = compare(est.mean, est.var, frac[..., None] * sky, np.zeros_like(est.var),
-                     image_mean_var_a=est.image_mean_var)
+                     image_mean_var_a=est.image_mean_var, dof=est.batches - 1)
     assert result, result
     # Saved as Mitsuba-style XML (transform_times as a string "t0 t1") and read back: the same image.
     xml = tmp_path / "moving.xml"
@@ -294,3 +295,54 @@ def test_shapes_with_one_motion_share_a_mover():
     row = img[H // 2]
     red_px, green_px = row[10], row[18]
     assert red_px[0] > 3 * red_px[1] and green_px[1] > 3 * green_px[0], (red_px, green_px)
+
+
+def test_hits_on_a_moving_ellipsoid_match_the_analytic_surface():
+    """Rays at chosen times against a unit sphere stretched to an ellipsoid (0.6, 0.3,
+    0.45) that moves and turns 90 degrees about (0, 1, 1)/sqrt(2): the hit point, the
+    distance, the normal (the inverse transpose: proportional to the object-space point
+    mapped by M^-T, not by M, for a non-uniform stretch), the shading frame and wi equal
+    the values solved here in the ellipsoid's frame at each ray's time."""
+    axis = np.array([0.0, 1.0, 1.0]) / math.sqrt(2.0)
+    stretch = np.diag([0.6, 0.3, 0.45, 1.0])
+
+    def pose(t):   # built directly: translation linear in t, a turn of 90 t degrees about axis
+        th = math.radians(90.0 * t)
+        k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+        m = np.eye(4)
+        m[:3, :3] = np.eye(3) + math.sin(th) * k + (1 - math.cos(th)) * k @ k
+        m[:3, 3] = [-0.5 + 1.0 * t, 0.2, 0.1 * t]
+        return m @ stretch
+
+    film = {"type": "hdrfilm", "width": 8, "height": 8}
+    scene = pbr.load_dict({"type": "scene", "cam": {"type": "perspective", "film": film},
+                           "egg": {"type": "sphere", "to_world": pose(0.0), "to_world_end": pose(1.0)}})
+    rng = np.random.default_rng(4)
+    n = 64
+    times = rng.random(n)
+    origins = rng.normal(size=(n, 3)) * 0.2 + [0.0, 0.0, -4.0]
+    targets = np.array([pose(t)[:3, 3] for t in times]) + rng.normal(size=(n, 3)) * 0.1
+    dirs = targets - origins
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    ray = mi.Ray3f(mi.Point3f(*origins.T), mi.Vector3f(*dirs.T), mi.Float(np.full(n, 1e4)), mi.Float(times),
+                   mi.Spectrum(0.0))
+    si, shape = scene.geometry.intersect(ray, mi.Bool(True))
+    hit = np.array(si.is_valid())
+    assert hit.sum() >= n - 2
+    got = {k: np.array(getattr(si, k)).reshape(3, -1).T if k != "t" else np.array(si.t) for k in ("p", "n", "t")}
+    sh_n = np.array(si.sh_frame.n).reshape(3, -1).T
+    wi = np.array(si.wi).reshape(3, -1).T
+    for j in np.flatnonzero(hit):
+        m = pose(times[j])
+        inv = np.linalg.inv(m)
+        o, d = inv[:3, :3] @ origins[j] + inv[:3, 3], inv[:3, :3] @ dirs[j]   # the ray in object space
+        a, b, c = d @ d, 2 * o @ d, o @ o - 1.0
+        t = (-b - math.sqrt(b * b - 4 * a * c)) / (2 * a)
+        p_obj = o + t * d
+        normal = inv[:3, :3].T @ p_obj
+        normal /= np.linalg.norm(normal)
+        assert got["t"][j] == pytest.approx(t, abs=2e-4)
+        assert np.allclose(got["p"][j], origins[j] + t * dirs[j], atol=2e-4)
+        assert np.allclose(got["n"][j], normal, atol=1e-3) and np.allclose(sh_n[j], normal, atol=1e-3)
+        assert wi[j][2] == pytest.approx(-dirs[j] @ normal, abs=1e-3)     # wi in the shading frame
+    assert np.all(np.array(shape)[hit] == 0)
