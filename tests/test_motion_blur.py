@@ -26,6 +26,7 @@ import pytest
 
 import pbr
 import pbr.scene.pbrt
+from pbr.scene.pbrt import write_ply
 from pbr.scene.xml import XMLError, to_xml
 from pbr.plugins.props import SceneError
 from pbr.validate import compare, estimate, welch_dof
@@ -346,3 +347,21 @@ def test_hits_on_a_moving_ellipsoid_match_the_analytic_surface():
         assert np.allclose(got["n"][j], normal, atol=1e-3) and np.allclose(sh_n[j], normal, atol=1e-3)
         assert wi[j][2] == pytest.approx(-dirs[j] @ normal, abs=1e-3)     # wi in the shading frame
     assert np.all(np.array(shape)[hit] == 0)
+
+
+@pytest.mark.parametrize("kind", ["obj", "ply"])
+def test_rotating_mesh_file_sweeps_its_turn(tmp_path, kind):
+    """The rotating rectangle of ``test_rotating_rectangle_sweeps_its_turn`` as a mesh
+    file (OBJ: Mitsuba's reader; PLY: trimesh): mesh files are read in object space when
+    they move (``to_world`` is not baked into the vertices)."""
+    pos = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], np.float64)
+    tri = np.array([[0, 1, 2], [0, 2, 3]])
+    path = tmp_path / f"square.{kind}"
+    if kind == "obj":
+        path.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in pos) + "f 1 2 3\nf 1 3 4\n")
+    else:
+        write_ply(str(path), pos, tri, None, None)
+    a, b, turn = 1.2, 0.3, 120.0
+    d = _view({"bar": {"type": kind, "filename": str(path), "to_world": T().scale([a, b, 1]),
+                       "to_world_end": T().rotate([0, 0, 1], turn) @ T().scale([a, b, 1]), "bsdf": BLACK}})
+    _check_against(d, _rectangle_miss_fraction(a, b, turn))

@@ -59,8 +59,8 @@ def _to_mi_transform(m: np.ndarray):
 def read_motion(props: Props, m0: np.ndarray, end: str = "to_world_end"):
     """The :class:`~.motion.AnimatedTransform` from ``m0`` (the plugin's ``to_world``) at
     ``transform_times[0]`` to ``end`` at ``transform_times[1]`` (pbrt-v4's
-    ``TransformTimes``; default [0, 1]; in XML a string "t0 t1"), or None where ``end`` is not given or equals
-    ``m0``. Cameras, shapes and instances read their motion here."""
+    ``TransformTimes``; default [0, 1]; in XML a string "t0 t1"), or None where ``end``
+    is not given or equals ``m0``. Cameras, shapes and instances read their motion here."""
     times = props.raw("transform_times", [0.0, 1.0])
     if isinstance(times, str):         # from XML: <string name="transform_times" value="0 1"/>
         times = times.replace(",", " ").split()
@@ -87,8 +87,9 @@ def _built_to_world(props: Props, object_space: bool) -> np.ndarray:
 
 def _mitsuba_mesh(props: Props, path: str, object_space: bool = False) -> "mi.Mesh":
     """An OBJ or serialized mesh read by Mitsuba's own loader, in world space. OBJ vertex
-    colours (``v x y z r g b``, which Mitsuba ignores) become ``vertex_color``."""
-    to_world = props.transform("to_world")
+    colours (``v x y z r g b``, which Mitsuba ignores) become ``vertex_color``.
+    ``object_space``: without ``to_world`` (a moving shape)."""
+    to_world = _built_to_world(props, object_space)
     d = {"type": props.type, "filename": path, "face_normals": props.bool("face_normals", False),
          "flip_normals": props.bool("flip_normals", False), "to_world": _to_mi_transform(to_world)}
     if props.type == "obj":
