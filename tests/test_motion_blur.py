@@ -365,3 +365,14 @@ def test_rotating_mesh_file_sweeps_its_turn(tmp_path, kind):
     d = _view({"bar": {"type": kind, "filename": str(path), "to_world": T().scale([a, b, 1]),
                        "to_world_end": T().rotate([0, 0, 1], turn) @ T().scale([a, b, 1]), "bsdf": BLACK}})
     _check_against(d, _rectangle_miss_fraction(a, b, turn))
+
+
+def test_frozen_render_of_moving_shapes():
+    """pbr.freeze records a render of a scene with moving shapes (their Mitsuba scenes
+    are part of the frozen function's state) and replays it bit for bit."""
+    d = _view({"ball": {"type": "sphere", "radius": 0.4, "to_world": T().translate([-1, 0.2, 0]),
+                        "to_world_end": T().translate([1, -0.2, 0]), "bsdf": BLACK}})
+    scene = pbr.load_dict(d)
+    frozen = pbr.freeze(lambda scene, seed: pbr.render(scene, spp=16, seed=seed))
+    for seed in range(3):
+        assert np.array_equal(np.asarray(frozen(scene, seed)), np.asarray(pbr.render(scene, spp=16, seed=seed)))
