@@ -9,7 +9,7 @@ import pbr
 
 ROOT = os.path.dirname(pbr.__file__)
 # Bottom (0) to top; the first pattern that matches a module name (without "pbr.") wins.
-LAYERS = [(r"(backend|memory|spectrum|sampling|dispatch|image|plotting)$", 0), (r"plugins(\..*)?$", 1),
+LAYERS = [(r"(backend|memory|spectrum|sampling|dispatch|image|plotting|motion)$", 0), (r"plugins(\..*)?$", 1),
           (r"textures(\..*)?$", 2),
           (r"(bsdfs|lights|media)(\..*)?$|(phase|cameras|lens|films|filters|geometry)$|samplers(\..*)?$", 3),
           (r"integrators(\..*)?$", 4), (r"scene(\..*)?$", 5), (r".*", 6)]

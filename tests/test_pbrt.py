@@ -125,18 +125,27 @@ LightSource "point" "rgb I" [1 2 3] "point3 from" [0 1 0]
     pbr.load_dict(d)
 
 
-def test_active_transform_end_time_is_refused(tmp_path):
+def test_active_transform_end_time_moves_shapes(tmp_path):
+    """ActiveTransform EndTime around a Shape: the shape moves (pbr's to_world_end, built
+    in object space; tests/test_motion_blur.py renders it); for Mitsuba 3 (mitsuba=True)
+    refused, or the start transform under approximate."""
     path = write(tmp_path, HEAD + """WorldBegin
 ActiveTransform EndTime
 Translate 0 1 0
 ActiveTransform All
 Shape "sphere"
 """)
-    with pytest.raises(XMLError, match=r"scene.pbrt:10: Shape: animated transforms"):
-        to_dict(path)
-    d, notes, _ = convert(path, approximate=True)
+    s = to_dict(path)["shape_0001"]
+    np.testing.assert_allclose(s["center"], [0, 0, 0])
+    np.testing.assert_allclose(np.array(s["to_world"].matrix), np.eye(4))
+    np.testing.assert_allclose(np.array(s["to_world_end"].matrix)[:3, 3], [0, 1, 0])
+    assert s["transform_times"] == [0.0, 1.0]
+    with pytest.raises(XMLError, match=r"scene.pbrt:10: Shape: animated transforms .* Mitsuba 3"):
+        to_dict(path, mitsuba=True)
+    d, notes, _ = convert(path, approximate=True, mitsuba=True)
     assert any("animated transforms" in n for n in notes)
     np.testing.assert_allclose(d["shape_0001"]["center"], [0, 0, 0])
+    assert "to_world_end" not in d["shape_0001"]
 
 
 def test_parameter_types(tmp_path):

@@ -28,6 +28,7 @@ import numpy as np
 from .backend import Struct
 from .films import FILMS, HDRFilm
 from .lens import LensSystem, read_lens_file
+from .geometry import read_motion
 from .samplers import SAMPLERS, IndependentSampler
 from .sampling import square_to_uniform_disk_concentric
 from .plugins.props import Props
@@ -67,69 +68,9 @@ def _x_fov(props: Props, aspect: float) -> float:
     return 2.0 * math.degrees(math.atan(t))
 
 
-def _polar(m: np.ndarray):
-    """(translation, unit quaternion (w, x, y, z), stretch S) of an affine 4x4 ``m`` with
-    linear part R S (R a rotation, S symmetric positive: the polar decomposition)."""
-    a = m[:3, :3]
-    u, sig, vt = np.linalg.svd(a)
-    r = u @ vt
-    if np.linalg.det(r) < 0:     # a reflection (e.g. pbrt-v4's Scale -1 1 1): keep it in S
-        u[:, -1] = -u[:, -1]
-        r = u @ vt
-    stretch = r.T @ a
-    w = math.sqrt(max(0.0, 1.0 + r[0, 0] + r[1, 1] + r[2, 2])) / 2
-    x = math.sqrt(max(0.0, 1.0 + r[0, 0] - r[1, 1] - r[2, 2])) / 2
-    y = math.sqrt(max(0.0, 1.0 - r[0, 0] + r[1, 1] - r[2, 2])) / 2
-    z = math.sqrt(max(0.0, 1.0 - r[0, 0] - r[1, 1] + r[2, 2])) / 2
-    x = math.copysign(x, r[2, 1] - r[1, 2])
-    y = math.copysign(y, r[0, 2] - r[2, 0])
-    z = math.copysign(z, r[1, 0] - r[0, 1])
-    return m[:3, 3].copy(), np.array([w, x, y, z]), stretch
-
-
-def _quat_matrix(q):
-    """Rows of the rotation matrix of unit quaternion ``q`` = (w, x, y, z)."""
-    w, x, y, z = q
-    return [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
-
-
-class CameraMotion:
-    """A camera-to-world transform moving between ``m0`` at time ``t0`` and ``m1`` at
-    ``t1`` (clamped outside): pbrt-v4's ``AnimatedTransform`` (translation and stretch
-    interpolated linearly, rotation by slerp)."""
-
-    def __init__(self, m0: np.ndarray, m1: np.ndarray, t0: float, t1: float):
-        self.t0, self.t1 = t0, t1
-        self.tr0, q0, self.s0 = _polar(m0)
-        self.tr1, q1, self.s1 = _polar(m1)
-        if np.dot(q0, q1) < 0:
-            q1 = -q1
-        self.q0, self.q1 = q0, q1
-        self.theta = math.acos(min(1.0, float(np.dot(q0, q1))))
-
-    def at(self, time):
-        """(rows of the linear part, origin) at ``time`` (a Dr.Jit Float): lists of Floats."""
-        t = dr.clip((time - self.t0) / max(self.t1 - self.t0, 1e-30), 0.0, 1.0)
-        if self.theta < 1e-4:
-            q = [dr.lerp(float(a), float(b), t) for a, b in zip(self.q0, self.q1)]
-            inv = dr.rsqrt(sum(c * c for c in q))
-            q = [c * inv for c in q]
-        else:
-            s = 1.0 / math.sin(self.theta)
-            wa, wb = dr.sin((1.0 - t) * self.theta) * s, dr.sin(t * self.theta) * s
-            q = [wa * float(a) + wb * float(b) for a, b in zip(self.q0, self.q1)]
-        r = _quat_matrix(q)
-        st = [[dr.lerp(float(self.s0[i, j]), float(self.s1[i, j]), t) for j in range(3)] for i in range(3)]
-        lin = [[sum(r[i][k] * st[k][j] for k in range(3)) for j in range(3)] for i in range(3)]
-        o = [dr.lerp(float(a), float(b), t) for a, b in zip(self.tr0, self.tr1)]
-        return lin, o
-
-
 class ProjectiveCamera:
     """What Mitsuba's projective cameras share: a film (with its crop window), a sampler,
-    the medium the camera sits in, ``to_world`` (possibly moving: :class:`CameraMotion`),
+    the medium the camera sits in, ``to_world`` (possibly moving: a :class:`~.motion.AnimatedTransform`),
     the shutter interval and the clip distances. Subclasses read their own parameters in
     ``_parameters(props)`` and call ``props.finish()``."""
 
@@ -141,7 +82,7 @@ class ProjectiveCamera:
     # projective integrators differentiate the camera pose through it.
     to_world_ad = None
     needs_aperture_sample = False  # sample_ray takes a 2D aperture sample (thinlens)
-    motion = None  # CameraMotion of a moving camera (None: static)
+    motion = None  # AnimatedTransform of a moving camera (None: static)
 
     def __init__(self, props: Props):
         self.film = HDRFilm(Props({"type": "hdrfilm"}, props.key("film")))
@@ -191,17 +132,9 @@ class ProjectiveCamera:
             raise props.error("shutterclose" if props.has("shutterclose") else "shutter_close",
                               f"the shutter closes ({c}) before it opens ({o})")
         self.shutter_open, self.shutter_close = o, c
-        times = props.raw("transform_times", [0.0, 1.0])
-        try:
-            t0, t1 = (float(t) for t in np.asarray(times, np.float64).reshape(2))
-        except (TypeError, ValueError):
-            raise props.error("transform_times", f"expected two times [start, end], got {times!r}") from None
-        if not t1 > t0:
-            raise props.error("transform_times", f"the end time must exceed the start time, got {times!r}")
-        if props.has("to_world_end"):
-            m1 = props.transform("to_world_end")
-            if not np.allclose(m1, self.to_world) and c > o:
-                self.motion = CameraMotion(self.to_world, m1, t0, t1)
+        motion = read_motion(props, self.to_world)
+        if motion is not None and c > o:
+            self.motion = motion
 
     @property
     def pinhole(self) -> bool:

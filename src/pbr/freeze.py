@@ -37,7 +37,7 @@ def scene_state(scene: Scene) -> list:
     """The Dr.Jit state a frozen function may read or change through ``scene``: its table
     arrays, the containers in which an update re-binds arrays (the texture tables, the
     parameter values: a replay assigns the new values there) and the Mitsuba scene
-    (traversable by Dr.Jit)."""
+    (traversable by Dr.Jit), and those of its moving shapes."""
     arrays = []
 
     def keep(x):
@@ -48,7 +48,7 @@ def scene_state(scene: Scene) -> list:
     # Attribute dicts of the BSDF families whose tables an update re-binds (``eta``).
     refreshed = [vars(f) for f in scene.bsdfs.families.values() if hasattr(f, "refresh_params")]
     return [arrays, scene.textures.tables, refreshed, [owner.params for owner in scene.param_owners()],
-            scene.mi_scene]
+            scene.mi_scene, [mover for mover, _ in scene.geometry.movers]]
 
 
 def _state(args, kwargs) -> list:

@@ -26,6 +26,7 @@ import mitsuba as mi
 import numpy as np
 
 from . import dispatch
+from .motion import AnimatedTransform, inverse3
 from .plugins.props import Props, SceneError, did_you_mean
 from .textures.meshattr import attach, file_attributes
 
@@ -55,10 +56,40 @@ def _to_mi_transform(m: np.ndarray):
     return mi.ScalarTransform4f(m.astype(np.float64))
 
 
-def _mitsuba_mesh(props: Props, path: str) -> "mi.Mesh":
+def read_motion(props: Props, m0: np.ndarray, end: str = "to_world_end"):
+    """The :class:`~.motion.AnimatedTransform` from ``m0`` (the plugin's ``to_world``) at
+    ``transform_times[0]`` to ``end`` at ``transform_times[1]`` (pbrt-v4's
+    ``TransformTimes``; default [0, 1]; in XML a string "t0 t1"), or None where ``end``
+    is not given or equals ``m0``. Cameras, shapes and instances read their motion here."""
+    times = props.raw("transform_times", [0.0, 1.0])
+    if isinstance(times, str):         # from XML: <string name="transform_times" value="0 1"/>
+        times = times.replace(",", " ").split()
+    try:
+        t0, t1 = (float(t) for t in np.asarray(times, np.float64).reshape(2))
+    except (TypeError, ValueError):
+        raise props.error("transform_times", f"expected two times [start, end], got {times!r}") from None
+    if not t1 > t0:
+        raise props.error("transform_times", f"the end time must exceed the start time, got {times!r}")
+    if not props.has(end):
+        return None
+    m1 = props.transform(end)
+    if abs(np.linalg.det(m1[:3, :3])) < 1e-300 or np.any(m1[3] != (0.0, 0.0, 0.0, 1.0)):
+        raise props.error(end, "expected an invertible affine transform")
+    return None if np.allclose(m1, m0) else AnimatedTransform(m0, m1, t0, t1)
+
+
+def _built_to_world(props: Props, object_space: bool) -> np.ndarray:
+    """The ``to_world`` a shape is built with: its own, or the identity for a moving shape
+    (built in its object space; its motion moves it)."""
+    m = props.transform("to_world")
+    return np.eye(4) if object_space else m
+
+
+def _mitsuba_mesh(props: Props, path: str, object_space: bool = False) -> "mi.Mesh":
     """An OBJ or serialized mesh read by Mitsuba's own loader, in world space. OBJ vertex
-    colours (``v x y z r g b``, which Mitsuba ignores) become ``vertex_color``."""
-    to_world = props.transform("to_world")
+    colours (``v x y z r g b``, which Mitsuba ignores) become ``vertex_color``.
+    ``object_space``: without ``to_world`` (a moving shape)."""
+    to_world = _built_to_world(props, object_space)
     d = {"type": props.type, "filename": path, "face_normals": props.bool("face_normals", False),
          "flip_normals": props.bool("flip_normals", False), "to_world": _to_mi_transform(to_world)}
     if props.type == "obj":
@@ -99,17 +130,18 @@ def _obj_vertex_colours(mesh, path: str, d: dict, props: Props) -> dict:
     return {"vertex_color": colours[rows]}
 
 
-def load_mesh_file(props: Props, path: str) -> "mi.Mesh":
+def load_mesh_file(props: Props, path: str, object_space: bool = False) -> "mi.Mesh":
     """Read a mesh file into an ``mi.Mesh`` in world space: OBJ and serialized files with
     Mitsuba's loaders, PLY files with trimesh.
 
     Conventions follow Mitsuba's own loaders: OBJ texture coordinates are flipped
     vertically (``flip_tex_coords``, default true); missing vertex normals are
-    recomputed (smooth) unless ``face_normals`` is true."""
+    recomputed (smooth) unless ``face_normals`` is true. ``object_space``: without
+    ``to_world`` (a moving shape)."""
     if props.type in ("obj", "serialized"):
-        return _mitsuba_mesh(props, path)
+        return _mitsuba_mesh(props, path, object_space)
     import trimesh
-    to_world = props.transform("to_world")
+    to_world = _built_to_world(props, object_space)
     face_normals = props.bool("face_normals", False)
     flip_tc = props.bool("flip_tex_coords", props.type == "obj")
     flip_normals = props.bool("flip_normals", False)
@@ -159,21 +191,22 @@ def load_mesh_file(props: Props, path: str) -> "mi.Mesh":
     return m
 
 
-def shape_to_mitsuba(props: Props, resolve_path):
-    """The Mitsuba object or dict for one shape (geometry only, no BSDF/emitter)."""
+def shape_to_mitsuba(props: Props, resolve_path, object_space: bool = False):
+    """The Mitsuba object or dict for one shape (geometry only, no BSDF/emitter);
+    ``object_space``: built without its ``to_world`` (a moving shape)."""
     t = props.type
     if t not in SHAPE_PARAMS:
         raise props.error(None, f"unsupported shape type {t!r}{did_you_mean(t, SHAPE_PARAMS)} "
                                         f"(supported: {', '.join(SHAPE_PARAMS)})")
     if t in MESH_FILES:
         path = resolve_path(props.string("filename"), props.key("filename"))
-        return load_mesh_file(props, path)
+        return load_mesh_file(props, path, object_space)
     d = {"type": t}
     for k in SHAPE_PARAMS[t]:
         if not props.has(k):
             continue
         if k == "to_world":
-            d[k] = _to_mi_transform(props.transform(k))
+            d[k] = _to_mi_transform(_built_to_world(props, object_space))
         elif k == "flip_normals":
             d[k] = props.bool(k)
         elif k in ("center", "p0", "p1"):
@@ -211,34 +244,63 @@ class Geometry:
     """Mitsuba scene holding the shapes; ray queries for the integrators.
 
     ``mi_index[i]`` is pbr shape ``i``'s position in ``mi_scene.shapes()`` (and
-    ``shapes_dr()``; -1 for a shape inside a shape group); ``shape_of_id`` maps a shape's
-    registry id to its pbr index.
+    ``shapes_dr()``; -1 for a shape inside a shape group or a moving shape);
+    ``shape_of_id`` maps a shape's registry id to its pbr index.
 
     Instancing (Mitsuba's ``shapegroup``/``instance``): ``groups`` maps pbr shapes to
     the group holding them (built Mitsuba objects, not shapes of the scene themselves);
-    ``instances`` lists (group, to_world) pairs. A hit on an instance resolves to the
+    ``instances`` lists (group, to_world, motion) triples (motion: an
+    :class:`~.motion.AnimatedTransform`, or None). A hit on an instance resolves to the
     group's shape that was hit (``si.shape``; the preliminary intersection's shape
     pointer is empty on instance hits), so every instance has its shapes' BSDFs and
-    media, as in Mitsuba."""
+    media, as in Mitsuba.
 
-    def __init__(self, shapes: list, groups: dict | None = None, instances: list | None = None):
-        groups, instances = groups or {}, instances or []
+    Motion blur (pbrt-v4's animated primitives): ``motions`` maps top-level pbr shapes
+    to their :class:`~.motion.AnimatedTransform`. Mitsuba 3.9 builds every shape and
+    instance at one time, so each moving shape (in its object space) and each shape group
+    of a moving instance (in its own space) is a Mitsuba scene of its own, a *mover*
+    (moving shapes with the same motion share one):
+    a ray is taken into its space at the ray's time, intersected there, and the nearest
+    of the static hit and the movers' hits is taken back to world space. A scene without
+    movers traces exactly the queries it traced before."""
+
+    def __init__(self, shapes: list, groups: dict | None = None, instances: list | None = None,
+                 motions: dict | None = None):
+        groups, instances, motions = groups or {}, instances or [], motions or {}
         d = {"type": "scene"}
         members: dict[str, dict] = {}
         for i, s in enumerate(shapes):
             if i in groups:
                 members.setdefault(groups[i], {})[f"shape_{i:06d}"] = s
-            else:
+            elif i not in motions:
                 d[f"shape_{i:06d}"] = s
         for g, m in members.items():
             d[f"group_{g}"] = {"type": "shapegroup", **m}
-        for j, (g, to_world) in enumerate(instances):
+        for j, (g, to_world, motion) in enumerate(instances):
             if g not in members:
                 raise SceneError(f"scene: internal error: instance of unknown shape group {g!r}")
-            d[f"instance_{j:06d}"] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"group_{g}"},
-                                      "to_world": _to_mi_transform(to_world)}
+            if motion is None:
+                d[f"instance_{j:06d}"] = {"type": "instance", "shapegroup": {"type": "ref", "id": f"group_{g}"},
+                                          "to_world": _to_mi_transform(to_world)}
         try:
             self.mi_scene = mi.load_dict(d, optimize=False)
+            # Movers: (Mitsuba scene in the moving thing's space, AnimatedTransform).
+            self.movers, spaces = [], {}
+            moving = [(i, build_shape(shapes[i])) for i in sorted(motions)]
+            # Shapes with the same motion (e.g. the meshes of one animated object) share one.
+            same: dict[tuple, dict] = {}
+            for i, obj in moving:
+                same.setdefault(motions[i].key, {})[f"shape_{i:06d}"] = (obj, motions[i])
+            for objs in same.values():
+                scene = mi.load_dict({"type": "scene", **{k: o for k, (o, _) in objs.items()}}, optimize=False)
+                self.movers.append((scene, next(iter(objs.values()))[1]))
+            for g, _, motion in instances:
+                if motion is not None:
+                    if g not in spaces:
+                        spaces[g] = mi.load_dict({"type": "scene", **members[g]}, optimize=False)
+                    self.movers.append((spaces[g], motion))
+        except SceneError:
+            raise
         except Exception as e:
             raise SceneError(f"scene: Mitsuba could not build the geometry: {e}") from None
         mi_shapes = self.mi_scene.shapes()
@@ -253,21 +315,37 @@ class Geometry:
         listed = to_pbr != NO_SHAPE
         self.mi_index[to_pbr[listed]] = np.arange(len(to_pbr))[listed]
         reg = np.array(dr.reinterpret_array(mi.UInt32, self.mi_scene.shapes_dr()), dtype=np.int64)
-        grouped = [(registry_id(shapes[i]), i) for i in groups]
+        grouped = [(registry_id(shapes[i]), i) for i in groups] + [(registry_id(obj), i) for i, obj in moving]
         size = max([int(reg.max(initial=0))] + [r for r, _ in grouped]) + 1
         table = np.full(size, NO_SHAPE, dtype=np.uint32)
         table[reg] = to_pbr
         for r, i in grouped:
             table[r] = i
         self.shape_of_id = mi.UInt32(table)
-        self.instanced = bool(instances)
+        self.instanced = any(m is None for _, _, m in instances)
         top = self.mi_index >= 0
         self._curve_ends([mi_shapes[k] for k in self.mi_index[top]], top)
+
+    @property
+    def moving(self) -> bool:
+        """Whether shapes or instances move (motion blur)."""
+        return bool(self.movers)
+
+    def bbox(self):
+        """Bounding box (``mi.ScalarBoundingBox3f``) of the geometry, moving shapes over
+        their whole motion included."""
+        bb = mi.ScalarBoundingBox3f(self.mi_scene.bbox())
+        for sc, motion in self.movers:
+            b = sc.bbox()
+            if b.valid():
+                for c in motion.motion_bounds(np.array(b.min, np.float64), np.array(b.max, np.float64)):
+                    bb.expand(mi.ScalarPoint3f(*(float(x) for x in c)))
+        return bb
 
     def mi_shape(self, i: int):
         """Mitsuba's shape object of pbr shape ``i`` (a top-level shape)."""
         if self.mi_index[i] < 0:
-            raise SceneError(f"scene: internal error: shape {i} is inside a shape group")
+            raise SceneError(f"scene: internal error: shape {i} is inside a shape group or moves")
         return self.mi_scene.shapes()[int(self.mi_index[i])]
 
     def sample_position(self, shapes: list, k, time, u, active):
@@ -317,7 +395,7 @@ class Geometry:
         that ``p`` slides along the ray and ``n``, ``uv`` and the frame follow the moving
         surface (its ``compute_surface_interaction`` without ``FollowShape``). The ray
         query itself stays detached; ``ray_ad``: the same ray attached to a camera pose
-        (the hit is then recomputed along it)."""
+        (the hit is then recomputed along it). Hits on moving shapes carry no derivatives."""
         with dr.suspend_grad():
             pi = self.mi_scene.ray_intersect_preliminary(ray, False, active)
         hit = active & pi.is_valid()
@@ -326,19 +404,94 @@ class Geometry:
             end = hit & (pi.prim_index == dr.gather(mi.UInt32, self.curve_last_segment, shape, hit))
             v = dr.minimum(pi.prim_uv.x, dr.gather(mi.Float, self.curve_v_max, shape, end))
             pi.prim_uv = mi.Point2f(dr.select(end, v, pi.prim_uv.x), pi.prim_uv.y)
+        moved = self._nearest_moving(ray, dr.select(hit, pi.t, ray.maxt), active) if self.movers else None
+        static = active if moved is None else active & (moved[1] == 0)
         # RayFlags.All is Mitsuba's default (uv, dp/du, shading frame; no normal partials):
         # the shading frame's tangent follows dp/du, which anisotropic BSDFs rely on.
         with dr.resume_grad(when=attached):
-            si = pi.compute_surface_interaction(ray if ray_ad is None else ray_ad, mi.RayFlags.All, active)
+            si = pi.compute_surface_interaction(ray if ray_ad is None else ray_ad, mi.RayFlags.All, static)
         if self.instanced:   # instance hits: pi.shape is empty, si.shape is the group's shape
             shape = self.shape_of(si.shape, hit)
+        if moved is not None:
+            shape = dr.select(static, shape, 0)
+            for k, (r, pk) in enumerate(moved[2]):
+                on = active & (moved[1] == k + 1)
+                sk = self._to_world(pk.compute_surface_interaction(r, mi.RayFlags.All, on), self.movers[k][1], ray)
+                si = dr.select(on, sk, si)
+                shape = dr.select(on, self.shape_of(sk.shape, on), shape)
         return si, shape
 
+    def _nearest_moving(self, ray: mi.Ray3f, t_static, active):
+        """(nearest distance, which: 0 the static hit or none, k + 1 mover k, per mover
+        (its ray in its space, its preliminary intersection)) of ``ray`` among the movers,
+        each searched up to the nearest distance so far (``t_static`` to begin with)."""
+        best, which, found = mi.Float(t_static), mi.UInt32(0), []
+        for k in range(len(self.movers)):
+            r = self._ray_into(k, ray, best)
+            with dr.suspend_grad():
+                pk = self.movers[k][0].ray_intersect_preliminary(r, False, active)
+            closer = active & pk.is_valid() & (pk.t < best)
+            best = dr.select(closer, pk.t, best)
+            which = dr.select(closer, k + 1, which)
+            found.append((r, pk))
+        return best, which, found
+
+    def _ray_into(self, k: int, ray: mi.Ray3f, maxt) -> mi.Ray3f:
+        """``ray`` in mover ``k``'s space at the ray's time, up to ``maxt``. Its direction
+        is not normalised, so that distances along it are the world ray's."""
+        inv, o = self.movers[k][1].inverse_at(ray.time)
+        return mi.Ray3f(_apply(inv, ray.o, o, mi.Point3f), _apply(inv, ray.d, None, mi.Vector3f), maxt,
+                        ray.time, ray.wavelengths)
+
+    @staticmethod
+    def _to_world(si, motion, ray: mi.Ray3f):
+        """Surface interaction ``si`` found in a mover's space taken to world space at
+        the ray's time (``motion``: its AnimatedTransform): points and tangents by the
+        transform, normals by its inverse transpose, the shading frame rebuilt around the
+        shading normal from the transformed tangent, ``wi`` from the world ray."""
+        lin, o = motion.at(ray.time)
+        inv_t = [list(col) for col in zip(*inverse3(lin))]
+        si.p = _apply(lin, si.p, o, mi.Point3f)
+        si.n = dr.normalize(_apply(inv_t, si.n, None, mi.Normal3f))
+        sn = dr.normalize(_apply(inv_t, si.sh_frame.n, None, mi.Normal3f))
+        s = _apply(lin, si.sh_frame.s, None, mi.Vector3f)
+        s = dr.normalize(s - sn * dr.dot(sn, s))
+        si.sh_frame = mi.Frame3f(s, dr.cross(sn, s), sn)
+        si.dp_du = _apply(lin, si.dp_du, None, mi.Vector3f)
+        si.dp_dv = _apply(lin, si.dp_dv, None, mi.Vector3f)
+        si.dn_du = _apply(inv_t, si.dn_du, None, mi.Vector3f)
+        si.dn_dv = _apply(inv_t, si.dn_dv, None, mi.Vector3f)
+        si.wi = si.to_local(-ray.d)
+        return si
+
     def occluded(self, ray: mi.Ray3f, active):
-        """True where something is hit between ``ray.o`` and ``ray.maxt`` (no surface
-        interaction is computed)."""
-        return self.mi_scene.ray_test(ray, active)
+        """True where ``ray`` hits something before its ``maxt`` (Mitsuba's ``ray_test``,
+        moving shapes included)."""
+        blocked = self.mi_scene.ray_test(ray, active)
+        for k, (sc, _) in enumerate(self.movers):
+            blocked |= sc.ray_test(self._ray_into(k, ray, ray.maxt), active & ~blocked)
+        return blocked
+
+    def nearest_distance(self, ray: mi.Ray3f, active):
+        """(distance to the nearest hit, whether there is one), moving shapes included."""
+        pi = self.mi_scene.ray_intersect_preliminary(ray, False, active)
+        hit = active & pi.is_valid()
+        if not self.movers:
+            return pi.t, hit
+        t, which, _ = self._nearest_moving(ray, dr.select(hit, pi.t, ray.maxt), active)
+        hit |= active & (which > 0)
+        return t, hit
 
     def unoccluded(self, si, p: mi.Point3f, active):
         """True where the segment from ``si`` to ``p`` is free of occluders."""
-        return ~self.occluded(si.spawn_ray_to(p), active)
+        ray = si.spawn_ray_to(p)
+        return ~self.occluded(ray, active)
+
+
+def _apply(rows, v, offset, cls):
+    """``rows`` (a 3x3 matrix's rows) times ``v``, plus ``offset`` (a point's translation;
+    None for vectors and normals), as a ``cls``."""
+    r = [rows[i][0] * v.x + rows[i][1] * v.y + rows[i][2] * v.z for i in range(3)]
+    if offset is not None:
+        r = [r[i] + offset[i] for i in range(3)]
+    return cls(*r)

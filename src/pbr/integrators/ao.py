@@ -84,6 +84,6 @@ class AOIntegrator(SamplingIntegrator):
         if self.max_distance < math.inf:
             shadow.maxt = self.max_distance
         free = hit & (pdf > 0)
-        free &= ~geo.mi_scene.ray_test(shadow, free)
+        free &= ~geo.occluded(shadow, free)
         value = w_local.z * dr.rcp(math.pi * pdf)
         return dr.select(free, d65(wl.lambda_) * value, 0.0), hit

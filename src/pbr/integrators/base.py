@@ -140,6 +140,8 @@ class SamplingIntegrator:
     needs_pinhole = False         # whether paths connect to the camera (a 'perspective' camera only)
     bytes_per_lane = 0            # per-path state kept in memory between kernels (pbr.memory)
     supports_films = True         # whether non-RGB films (sensor matrix, extra channels) develop right
+    supports_moving_shapes = True  # whether shapes may move (motion blur; light paths never do)
+    moving_shapes = False         # whether the scene being rendered has moving shapes (see prepare)
     # Records a function's kernels once and replays them (dr.freeze for pbr scenes): set
     # by pbr.freeze, a layer above the integrators; None where pbr.freeze is not loaded.
     recorder = None
@@ -180,6 +182,8 @@ class SamplingIntegrator:
         if getattr(cam, "weights_rays", False) and not self.supports_films:
             raise SceneError(f"{self.path}: the {self.name!r} integrator does not support the "
                              f"{type(cam).name!r} camera (its rays carry lens weights)")
+        # Moving shapes: every camera ray gets a time in the shutter, as for a moving camera.
+        self.moving_shapes = scene.geometry.moving
         self.light_sampler = scene.lights.sampler(self.light_sampler_type)
         if self.traces_light_paths:
             self.emission_sampler = scene.lights.sampler("power")
@@ -187,6 +191,9 @@ class SamplingIntegrator:
     def check(self, scene) -> None:
         """Raise a SceneError naming this integrator's key path where ``scene`` holds
         something it cannot render (called when a scene is loaded with it)."""
+        if scene.geometry.moving and (self.traces_light_paths or self.needs_pinhole or not self.supports_moving_shapes):
+            raise SceneError(f"{self.path}: the {self.name!r} integrator does not support moving shapes or "
+                             f"instances ('to_world_end': motion blur); use 'path' or 'volpath'")
         if self.surfaces_only and len(scene.media):
             raise SceneError(f"{self.path}: the {self.name!r} integrator does not support participating media "
                              f"(use 'volpath')")
@@ -275,7 +282,8 @@ class SamplingIntegrator:
         inside = (px >= 0) & (px < w) & (py >= 0) & (py < h)
         weight = dr.select(inside, weight, 0.0)
         aperture = rng.next_2d() if cam.needs_aperture_sample else None
-        time = cam.sample_time(rng.next_1d()) if getattr(cam, "motion", None) is not None else None
+        moves = getattr(cam, "motion", None) is not None or self.moving_shapes
+        time = cam.sample_time(rng.next_1d()) if moves else None
         if getattr(cam, "weights_rays", False):
             # A camera whose rays carry a weight (the realistic camera's lens throughput):
             # it scales the sample's radiance, not the filter weight the film divides by.

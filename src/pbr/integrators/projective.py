@@ -298,6 +298,7 @@ class ProjectivePathIntegrator(PathIntegrator):
     =============  ======  =======  ==============================================================
     """
 
+    supports_moving_shapes = False   # its silhouette edges are the static shapes'
     name = "prb_projective"
     default_max_depth = -1
     hide_through_null = False

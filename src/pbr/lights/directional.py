@@ -16,7 +16,7 @@ from .base import (LIGHT_TYPES, gather3, LeSample, LightSample, LightType, load_
 
 def scene_sphere(scene):
     """(centre, radius) of the scene's bounding sphere (as LightSet computes it)."""
-    bbox = scene.mi_scene.bbox()
+    bbox = scene.bbox()
     if not bbox.valid():
         return np.zeros(3), 1.0
     c = np.array(bbox.center(), dtype=np.float64)

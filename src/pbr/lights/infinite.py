@@ -25,7 +25,7 @@ INV_4PI = 1.0 / (4.0 * math.pi)
 
 def bounding_sphere(scene) -> tuple[np.ndarray, float]:
     """Centre and radius of the scene's bounding-box sphere (Mitsuba's ``set_scene``)."""
-    bbox = scene.mi_scene.bbox()
+    bbox = scene.bbox()
     if not bbox.valid():
         return np.zeros(3), 1.0
     c = np.array(bbox.center(), dtype=np.float64)

@@ -69,7 +69,7 @@ class LightSet:
         self.any_delta = any(f.delta for f in self.families.values())
         # Shape-attached families other than 'area' (directionalarea): L/pdf_Li mask them out.
         self._other_surface = any(getattr(f, "surface", False) for t, f in self.families.items() if t != "area")
-        bbox = scene.mi_scene.bbox()
+        bbox = scene.bbox()
         c = np.array(bbox.center()) if bbox.valid() else np.zeros(3)
         self.scene_center = c
         self.scene_radius = float(np.linalg.norm(np.array(bbox.max) - c)) if bbox.valid() else 1.0

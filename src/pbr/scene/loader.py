@@ -19,7 +19,7 @@ import os
 from .. import backend
 from ..bsdfs import BSDFSet, bsdf_names
 from ..cameras import SENSORS
-from ..geometry import CURVE_FILES, SHAPE_PARAMS, build_shape, shape_to_mitsuba
+from ..geometry import CURVE_FILES, SHAPE_PARAMS, build_shape, read_motion, shape_to_mitsuba
 from ..integrators import INTEGRATORS
 from ..lights import LIGHT_TYPES, LightSet
 from ..media import MEDIUM_TYPES, MediumSet
@@ -137,7 +137,17 @@ class Loader:
         path = f"scene.{key}"
         p = Props(v, path, self)
         p.mark("id")
-        geo = shape_to_mitsuba(p, self.resolve_path)
+        motion = read_motion(p, p.transform("to_world"))
+        if motion is not None:
+            if group is not None:
+                raise p.error("to_world_end", "shapes inside a shapegroup cannot move (give the instance "
+                                              "'to_world_end')")
+            if p.type in CURVE_FILES:
+                raise p.error("to_world_end", f"{p.type!r} shapes cannot move (motion blur)")
+            emitters = [k for k, c in p.children() if c["type"] in LIGHT_TYPES]
+            if emitters:
+                raise p.error(emitters[0], "moving shapes (with 'to_world_end') cannot carry emitters")
+        geo = shape_to_mitsuba(p, self.resolve_path, object_space=motion is not None)
         if group is not None:
             if p.type in CURVE_FILES:
                 raise p.error(None, f"{p.type!r} shapes inside a shapegroup are not supported")
@@ -184,6 +194,8 @@ class Loader:
         p.finish()
         if group is not None:
             shapes.groups[len(shapes)] = group
+        if motion is not None:
+            shapes.motions[len(shapes)] = motion
         shapes.add(geo, b, light, v.get("id", key), path, media)
 
     def _shapegroup(self, key: str, v: dict, shapes: ShapeList, defaults: dict) -> None:
@@ -207,10 +219,12 @@ class Loader:
 
     def _instance(self, key: str, v: dict, shapes: ShapeList) -> None:
         """``instance`` (Mitsuba's): the shapes of a referenced ``shapegroup`` moved by
-        ``to_world``."""
+        ``to_world`` (and, moving during the shutter, ``to_world_end`` at
+        ``transform_times[1]``: pbr's, as for shapes and cameras)."""
         p = Props(v, f"scene.{key}", self)
         p.mark("id")
         to_world = p.transform("to_world")
+        motion = read_motion(p, to_world)
         refs = []
         for k, c in p.children():
             if c["type"] != "ref":
@@ -223,7 +237,7 @@ class Loader:
         p.finish()
         if len(refs) != 1:
             raise p.error(None, f"an instance needs exactly one shapegroup reference, got {len(refs)}")
-        shapes.instances.append((refs[0].split(".", 1)[1], to_world))
+        shapes.instances.append((refs[0].split(".", 1)[1], to_world, motion))
 
     def load(self) -> Scene:
         sensors, integrator_props = [], None

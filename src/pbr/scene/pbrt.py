@@ -11,7 +11,8 @@ and units (docs/pbrt.md lists every mapping and what is approximated or left out
 * Cameras: pbrt's camera space is left-handed (x to the right on the image); Mitsuba's
   is right-handed with x to the left, so ``to_world = inverse(CTM) @ Scale(-1, 1, 1)``;
   ``fov`` is the field of view of the shorter image axis (Mitsuba's ``fov_axis``
-  'smaller'). A moving camera gets ``to_world_end`` and ``transform_times``.
+  'smaller'). A moving camera gets ``to_world_end`` and ``transform_times``; so do moving
+  shapes (built in their object space) and object instances (``ActiveTransform``).
 * Filters, films, cameras and textures that pbr registers under pbrt-v4's names
   (``gaussian`` of radius 1.5, ``mitchell``, ``sinc``, ``triangle``; ``rgb`` with its
   pixel sensor, ``gbuffer``, ``spectral``; ``spherical``, ``realistic``; ``imagemap``,
@@ -716,19 +717,61 @@ class PBRTScene:
         key = self.objects[name]
         if key not in self.out:
             return
-        self.add("instance", {"type": "instance", "to_world": _mi_transform(self.ctm()),
-                              "shapegroup": {"type": "ref", "id": key}}, d.where)
+        inst = {"type": "instance", "to_world": _mi_transform(self.ctm()), "shapegroup": {"type": "ref", "id": key}}
+        if self.animated():
+            if self.mitsuba:
+                self.unsupported(d, "an animated ObjectInstance (ActiveTransform EndTime) in a dict for Mitsuba 3 "
+                                    "(mitsuba=True): the start transform is used")
+            else:
+                inst.update(self.motion())
+        self.add("instance", inst, d.where)
+
+    # -- motion blur -----------------------------------------------------------------------------
+    def animated(self) -> bool:
+        """Whether the CTM differs at TransformTimes' start and end (ActiveTransform)."""
+        c0, c1 = self.state.ctm
+        return c0 is not c1 and not np.allclose(c0, c1)
+
+    def motion(self, m=None) -> dict:
+        """pbr's motion keys for the animated CTM (times ``m`` on the right, the shape's own
+        transform): ``to_world`` at the start, ``to_world_end`` at the end, ``transform_times``."""
+        m = np.eye(4) if m is None else m
+        return {"to_world": _mi_transform(self.state.ctm[0] @ m), "to_world_end": _mi_transform(self.state.ctm[1] @ m),
+                "transform_times": [float(x) for x in self.transform_times]}
+
+    def moving_shape(self, p: _Params, t: str) -> dict | None:
+        """A shape under an animated CTM, built in its object space (pbrt-v4 creates
+        animated shapes with the identity transform, so only ReverseOrientation flips them)
+        with the CTM's motion (pbr's ``to_world_end``, geometry.py)."""
+        saved = self.state.ctm
+        self.state.ctm = [np.eye(4), np.eye(4)]
+        try:
+            shape = self.shape(p, t)
+        finally:
+            self.state.ctm = saved
+        if shape is not None:
+            own = shape.pop("to_world", None)
+            shape.update(self.motion(None if own is None else np.asarray(own.matrix, np.float64)))
+        return shape
 
     # -- shapes ----------------------------------------------------------------------------------
     def _d_Shape(self, d):
         t, = self.args(d, 1, allow_params=True)
         p = _Params(d, self, self.state.attributes["shape"])
-        shape = self.shape(p, t)
+        moving = self.animated()
+        if moving and (self.mitsuba or self.current_object is not None or self.state.area is not None or t == "curve"):
+            why = ("in a dict for Mitsuba 3 (mitsuba=True)" if self.mitsuba else "inside ObjectBegin/ObjectEnd "
+                   "(an animated ObjectInstance moves)" if self.current_object is not None else "of curves"
+                   if t == "curve" else "with an area light")
+            self.unsupported(d, f"animated transforms of shapes (ActiveTransform EndTime) {why}: "
+                                f"the start transform is used")
+            moving = False
+        if moving:
+            shape = self.moving_shape(p, t)
+        else:
+            shape = self.shape(p, t)
         if shape is None:
             return
-        if self.state.ctm[0] is not self.state.ctm[1] and not np.allclose(self.state.ctm[0], self.state.ctm[1]):
-            self.unsupported(d, "animated transforms of shapes (ActiveTransform EndTime; Mitsuba's ray tracer "
-                                "builds every shape at one time, only cameras move): the start transform is used")
         mat = self.state.material
         if mat is None:
             if self.default_material is None:

@@ -25,7 +25,8 @@ class ShapeList:
     def __init__(self):
         self.geometry, self.bsdf, self.light, self.ids, self.paths, self.media = [], [], [], [], [], []
         self.groups: dict[int, str] = {}   # shape -> the shapegroup holding it (instancing)
-        self.instances: list = []          # (shapegroup id, 4x4 to_world) per instance
+        self.instances: list = []          # (shapegroup id, 4x4 to_world, motion or None) per instance
+        self.motions: dict = {}            # moving shape -> its AnimatedTransform (motion blur)
 
     def __len__(self):
         return len(self.ids)
@@ -45,7 +46,7 @@ class Scene:
         self.bsdfs = bsdfs
         self.lights = lights
         self.media = media
-        self.geometry = Geometry(shapes.geometry, shapes.groups, shapes.instances)
+        self.geometry = Geometry(shapes.geometry, shapes.groups, shapes.instances, shapes.motions)
         self.mi_scene = self.geometry.mi_scene
         self.shape_ids = shapes.ids
         # Mitsuba's shapes take pbr's ids (Geometry named them by position), so that
@@ -134,8 +135,9 @@ class Scene:
         return [EmitterView(self, g) for g in range(len(self.lights.entries))]
 
     def bbox(self):
-        """Bounding box of the geometry (Mitsuba's ``ScalarBoundingBox3f``)."""
-        return self.mi_scene.bbox()
+        """Bounding box of the geometry (Mitsuba's ``ScalarBoundingBox3f``; moving shapes
+        over their whole motion)."""
+        return self.geometry.bbox()
 
     def requires_grad(self) -> bool:
         """Whether a parameter (pbr's, a shape's geometry) has gradients enabled."""

@@ -698,6 +698,8 @@ def to_xml(d: dict, base_dir: str | None = None) -> str:
         if isinstance(v, str):
             v = filename(v) if name == "filename" else v
             return f"{pad}<string name={q} value={quoteattr(v)}/>"
+        if name == "transform_times" and np.size(v) == 2:   # pbr's motion times: "t0 t1"
+            return f'{pad}<string name={q} value="{" ".join(num(float(x)) for x in v)}"/>'
         if hasattr(v, "matrix") or (isinstance(v, np.ndarray) and v.size == 16):
             return f'{pad}<transform name={q}><matrix value="{matrix(v)}"/></transform>'
         if isinstance(v, (list, tuple, np.ndarray)) and len(v) == 3 and not isinstance(v[0], (list, tuple)):

@@ -107,6 +107,7 @@ class RadiosityIntegrator(SamplingIntegrator):
     ===================  ======  ============  ============================================================
     """
 
+    supports_moving_shapes = False   # its patches are the static shapes'
     name = "radiosity"
 
     def __init__(self, props):
