@@ -311,12 +311,13 @@ def _newton_bisection(F, target, active):
     while go:
         v, dv = F(t)
         err = v - target
+        done = (dr.abs(err) <= 1e-6) | (hi - lo <= 1e-6) | (it >= 40)
         hi = dr.select(err > 0, t, hi)
         lo = dr.select(err > 0, lo, t)
         tn = t - err / dv
-        t = dr.select((tn > lo) & (tn < hi) & (dv != 0), tn, 0.5 * (lo + hi))
+        t = dr.select(done, t, dr.select((tn > lo) & (tn < hi) & (dv != 0), tn, 0.5 * (lo + hi)))
         it += 1
-        go &= (dr.abs(err) > 1e-6) & (hi - lo > 1e-6) & (it < 40)
+        go &= ~done
     return t
 
 
