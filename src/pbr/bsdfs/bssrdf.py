@@ -53,14 +53,25 @@ def radius_nodes() -> np.ndarray:
     return r
 
 
-def fresnel_moment1(eta: float) -> float:
-    """pbrt-v4's polynomial fit of the first Fresnel moment (integral of F cos)."""
-    e = [eta ** k for k in range(6)]
-    if eta < 1:
-        c = (0.45966, -1.73965, 3.37668, -3.904945, 2.49277, -0.68441)
-    else:
-        c = (-4.61686, 11.1136, -10.4646, 5.11455, -1.27198, 0.12746)
-    return sum(ci * ei for ci, ei in zip(c, e))
+# pbrt-v4's polynomial fits of the first Fresnel moment, for eta < 1 and eta >= 1.
+_FM1 = ((0.45966, -1.73965, 3.37668, -3.904945, 2.49277, -0.68441),
+        (-4.61686, 11.1136, -10.4646, 5.11455, -1.27198, 0.12746))
+
+
+def _polynomial(c, x):
+    v = 0.0 * x
+    for ck in reversed(c):
+        v = v * x + ck
+    return v
+
+
+def fresnel_moment1(eta):
+    """pbrt-v4's fit of the first Fresnel moment, the integral of F(mu) mu over mu in
+    [0, 1] (for a float or a Dr.Jit array ``eta``)."""
+    lo, hi = _polynomial(_FM1[0], eta), _polynomial(_FM1[1], eta)
+    if isinstance(eta, dr.ArrayBase):
+        return dr.select(eta < 1, lo, hi)
+    return lo if eta < 1 else hi
 
 
 def fresnel_moment2(eta: float) -> float:
@@ -424,17 +435,7 @@ def sw_eval(eta, wo):
     transport: (1 - F(cos)) / (c pi) eta^2 cos, with c = 1 - 2 FM1(1 / eta) making it
     integrate to eta^2 over the hemisphere; 0 below the surface. ``eta``: a Python float
     or a Float per lane."""
-    c = 1.0 - 2.0 * _fm1(dr.rcp(eta))
+    c = 1.0 - 2.0 * fresnel_moment1(dr.rcp(eta))
     f = (1.0 - fresnel_dielectric(wo.z, eta)[0]) * eta * eta / (c * math.pi) * wo.z
     return dr.select(wo.z > 0, f, 0.0)
 
-
-def _fm1(eta):
-    """fresnel_moment1 for Dr.Jit values (eta < 1 branch and eta >= 1 branch)."""
-    lo = (0.45966, -1.73965, 3.37668, -3.904945, 2.49277, -0.68441)
-    hi = (-4.61686, 11.1136, -10.4646, 5.11455, -1.27198, 0.12746)
-    vlo, vhi = mi.Float(0.0), mi.Float(0.0)
-    for c_lo, c_hi in zip(reversed(lo), reversed(hi)):
-        vlo = vlo * eta + c_lo
-        vhi = vhi * eta + c_hi
-    return dr.select(eta < 1, vlo, vhi)

@@ -203,8 +203,8 @@ class VolPathIntegrator(_MediumAware):
 
     def _next_event(self, scene, rng, wl, ref, si, shape, sc, p_sc, medium, nee, rs, L, beta, r_u, lobe):
         """Light sampling from a vertex ``ref`` (:func:`.volume.nee_reference`: ``p_sc`` on
-        medium lanes ``sc``, the surface ``si`` of ``shape`` elsewhere) on lanes ``nee`` (``rs``: those at surfaces), with the
-        spectral MIS weight against ``lobe``'s density; ``lobe(wo, ls, u1, u2)`` gives
+        medium lanes ``sc``, the surface ``si`` of ``shape`` elsewhere) on lanes ``nee``
+        (``rs``: those at surfaces), with the spectral MIS weight against ``lobe``'s density; ``lobe(wo, ls, u1, u2)`` gives
         (f |cos|, pdf) toward the light and a sample of the next direction. Returns (L
         with the light added, that sample)."""
         lights, media = scene.lights, scene.media
