@@ -267,3 +267,8 @@ def test_coloured_slab_reflects_each_channel():
     b, sb = channels({"type": "diffuse", "reflectance": rgb})
     expected = F + (1 - F) * b
     assert np.all(np.abs(a - expected) < 4 * np.hypot(sa, sb) + 3e-3), (a, sa, expected)
+
+
+def test_wrapped_subsurface_warns_that_it_is_a_boundary_only():
+    with pytest.warns(RuntimeWarning, match="dielectric boundary only"):
+        pbr.load_dict(slab({"type": "twosided", "b": {"type": "subsurface"}}, res=4))

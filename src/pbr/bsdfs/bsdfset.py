@@ -9,6 +9,8 @@ Mitsuba's ``twosided``, ``mask``, ``blendbsdf`` (pbrt-v4's ``mix``), ``normalmap
 
 from __future__ import annotations
 
+import warnings
+
 import drjit as dr
 import mitsuba as mi
 
@@ -238,6 +240,9 @@ class BSDFSet:
                and o == NO_BACK for i, (t, _, b, o) in enumerate(self.entries)]
         self.subsurface_of = mi.Bool(sss)
         self.has_subsurface = any(sss)
+        if any(t == "subsurface" and not p for (t, _, _, _), p in zip(self.entries, sss)):
+            warnings.warn("subsurface inside twosided, mask, a blend or a normal/bump map: rendered as its "
+                          "dielectric boundary only (no subsurface transport)", RuntimeWarning, stacklevel=2)
 
     def smooth(self, bsdf_id, active):
         """True where the entry has a non-delta lobe (worth sampling a light for)."""
