@@ -21,8 +21,7 @@ T4 = None
 
 
 @pytest.fixture(scope="module", autouse=True)
-def backend():
-    pbr.set_backend("llvm")
+def transforms():
     global T4
     T4 = mi.ScalarTransform4f
 
@@ -272,3 +271,15 @@ def test_coloured_slab_reflects_each_channel():
 def test_wrapped_subsurface_warns_that_it_is_a_boundary_only():
     with pytest.warns(RuntimeWarning, match="dielectric boundary only"):
         pbr.load_dict(slab({"type": "twosided", "b": {"type": "subsurface"}}, res=4))
+
+
+def test_probe_rays_stay_outside_symbolic_calls(capfd):
+    # OptiX forbids ray tracing in direct callables (tests/test_no_rays_in_calls.py): the
+    # probe walk and the exit point's shadow rays are traced in the path loop itself.
+    from test_no_rays_in_calls import _ir_of_render, _scene, ray_queries_in_calls
+    _, plain = ray_queries_in_calls(_ir_of_render(_scene("volpath"), capfd))
+    d = _scene("volpath")
+    d["ball"] = {"type": "sphere", "radius": 0.3, "bsdf": {"type": "subsurface", "reflectance": 0.5, "mfp": 0.05}}
+    d["glass"] = {"type": "sphere", "center": [0.5, -0.5, 0.3], "radius": 0.2, "bsdf": {"type": "dielectric"}}
+    inside, total = ray_queries_in_calls(_ir_of_render(d, capfd))
+    assert total > plain and inside == 0, (inside, total, plain)   # the probe and exit rays are there
