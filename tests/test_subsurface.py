@@ -283,3 +283,12 @@ def test_probe_rays_stay_outside_symbolic_calls(capfd):
     d["glass"] = {"type": "sphere", "center": [0.5, -0.5, 0.3], "radius": 0.2, "bsdf": {"type": "dielectric"}}
     inside, total = ray_queries_in_calls(_ir_of_render(d, capfd))
     assert total > plain and inside == 0, (inside, total, plain)   # the probe and exit rays are there
+
+
+def test_glass_beside_a_subsurface_object_still_transmits():
+    # Only lanes at subsurface entries take the probe step: a glass slab under a uniform
+    # sky of 1 shows 1 (reflection plus transmission) with a subsurface ball in the scene.
+    d = slab({"type": "dielectric", "int_ior": ETA, "ext_ior": 1.0})
+    d["ball"] = {"type": "sphere", "center": [20.0, 0.0, 0.0], "bsdf": {"type": "subsurface"}}
+    m, se = _mean(d, 64, 2)
+    assert m == pytest.approx(1.0, abs=0.01), (m, se)

@@ -57,8 +57,8 @@ def probe_walk(scene, bsdf_id, p0, p1, u, time, active):
 
 
 def probe(scene, rng, si, bsdf_id, wl, active):
-    """Light entering the subsurface entry ``bsdf_id`` at ``si`` on ``active`` lanes: (lanes
-    with an exit point, the exit interaction (``wi`` along its shading normal), its shape,
+    """Light entering surfaces at ``si`` on ``active`` lanes: (the lanes at a subsurface
+    entry (``bsdf_id``), those of them with an exit point, the exit interaction (``wi`` along its shading normal), its shape,
     the path weight S_p / density (hero wavelength's density, times the number of
     candidates), each wavelength's density over the hero's, the material's eta)."""
     lanes, fam, idx = scene.bsdfs.subsurface(bsdf_id, active)
@@ -84,7 +84,7 @@ def probe(scene, rng, si, bsdf_id, wl, active):
     si_x.time = si.time
     si_x.wi = mi.Vector3f(0.0, 0.0, 1.0)
     si_x.wavelengths = si.wavelengths
-    return found, si_x, shape_x, weight, ratio, dr.gather(mi.Float, tab.eta, idx, lanes)
+    return lanes, found, si_x, shape_x, weight, ratio, dr.gather(mi.Float, tab.eta, idx, lanes)
 
 
 def exit_lobe(eta, active):

@@ -228,12 +228,12 @@ class VolPathIntegrator(_MediumAware):
 
     def _subsurface(self, scene, rng, wl, si, bsdf_id, bs, sss, L, beta, r_u, r_l, eta, prev_p, prev_n,
                     prev_delta, ray, medium, cont):
-        """Lanes ``sss`` refracted into a ``subsurface`` material (sample ``bs``): move the
-        path to an exit point found by a probe ray, weighted by the BSSRDF's profile over
-        its density (r_u by each wavelength's density over the hero's), sample the lights
-        and the next direction there with the exit lobe S_w. Lanes with no exit point
-        end. Returns the updated path state."""
-        found, si_x, shape_x, w_sp, ru_sp, eta_x = subsurface.probe(scene, rng, si, bsdf_id, wl, sss)
+        """Lanes ``sss`` refracted into a surface (sample ``bs``), where it has a
+        ``subsurface`` material: move the path to an exit point found by a probe ray,
+        weighted by the BSSRDF's profile over its density (r_u by each wavelength's
+        density over the hero's), sample the lights and the next direction there with the
+        exit lobe S_w. Lanes with no exit point end. Returns the updated path state."""
+        sss, found, si_x, shape_x, w_sp, ru_sp, eta_x = subsurface.probe(scene, rng, si, bsdf_id, wl, sss)
         beta[found] = beta * w_sp
         r_u[found] = r_u * ru_sp
         no = mi.Bool(False)
