@@ -81,7 +81,8 @@ def test_kernel_profile_matches_beam_diffusion():
     tab = _tables()
     sp = mi.Spectrum(mi.Float(np.full(400, sigma_t, np.float32)))
     rs = mi.Spectrum(mi.Float(rho.astype(np.float32)))
-    v = _np(bssrdf.sr(tab, mi.UInt32(0), sp, rs, mi.Float((r_opt / sigma_t).astype(np.float32)), mi.Bool(True))[0])
+    prof = bssrdf.Profile(tab, mi.UInt32(0), sp, rs, mi.Bool(True))
+    v = _np(prof.sr(mi.Float((r_opt / sigma_t).astype(np.float32)), mi.Bool(True))[0])
     ref = np.array([_profile(a, np.array([b]))[0] / (2 * np.pi * b) for a, b in zip(rho, r_opt)]) * sigma_t ** 2
     # Where the profile matters (2 pi r S_r above 1e-4 per unit optical radius; its deep
     # tail, ~1e-10, is interpolated between nodes 20% apart in r, as in pbrt-v4).
@@ -109,14 +110,14 @@ def test_sampled_radii_follow_the_profile():
     n, rho = 200000, 0.9
     tab = _tables()
     u = mi.Float((np.arange(n) + 0.5) / n)
-    r, ok = bssrdf.sample_sr(tab, mi.UInt32(0), mi.Float(rho), u, mi.Bool(True))
+    prof = bssrdf.Profile(tab, mi.UInt32(0), mi.Spectrum(1.0), mi.Spectrum(rho), mi.Bool(True))
+    r, ok = bssrdf.sample_sr(prof, u, mi.Bool(True))
     r = _np(r)[np.broadcast_to(_np(ok), (n,)) > 0]
     assert len(r) == n
     edges = np.concatenate([[0.0], np.geomspace(0.01, 30.0, 40)])
     hist = np.histogram(r, edges)[0] / n
     grid = np.linspace(0, 30, 300001)
-    dens = _np(bssrdf.sr(tab, mi.UInt32(0), mi.Spectrum(1.0), mi.Spectrum(rho), mi.Float(grid.astype(np.float32)),
-                         mi.Bool(True), pdf=True)[0]) * 2 * np.pi * grid
+    dens = _np(prof.sr(mi.Float(grid.astype(np.float32)), mi.Bool(True), pdf=True)[0]) * 2 * np.pi * grid
     cdf = np.concatenate([[0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(grid))])
     expect = np.diff(np.interp(edges, grid, cdf))
     assert np.abs(hist - expect).max() < 2e-3, np.abs(hist - expect).max()

@@ -293,21 +293,35 @@ def _spectral(fn, n=4):
     return mi.Spectrum(*[fn(k) for k in range(n)])
 
 
-def sr(tab, inst, sigma_t, rho, r, active, pdf: bool = False):
-    """The radial profile S_r(r) per wavelength (world units), or with ``pdf`` its
-    density as a distribution over the plane (S_r / rho_eff)."""
-    def one(k):
-        rows, wr, ok = _rows(tab, inst, rho[k], active)
-        r_opt = r * sigma_t[k]
-        p, ok2 = _profile(tab, rows, wr, r_opt, ok)
-        v = dr.select(r_opt > 0, p / (2.0 * math.pi * dr.maximum(r_opt, 1e-30)), p) * sigma_t[k] * sigma_t[k]
-        if pdf:
+class Profile:
+    """The BSSRDF profile of a medium at a hit (per lane: instance ``inst``'s table,
+    ``sigma_t`` and albedo ``rho`` per wavelength): each wavelength's table rows and
+    effective albedo are looked up once and shared by every evaluation."""
+
+    def __init__(self, tab, inst, sigma_t, rho, active):
+        self.tab, self.inst, self.sigma_t, self.rho = tab, inst, sigma_t, rho
+        self.rows = [_rows(tab, inst, rho[k], active) for k in range(4)]
+        self.rho_eff = []
+        for rows, wr, ok in self.rows:
             re = mi.Float(0.0)
             for rj, wj in zip(rows, wr):
-                re += wj * dr.gather(mi.Float, tab.rho_eff, rj, ok2)
-            v = v / dr.select(re > 0, re, 1.0)
-        return dr.select(ok2, dr.maximum(v, 0.0), 0.0)
-    return _spectral(one)
+                re += wj * dr.gather(mi.Float, tab.rho_eff, rj, ok)
+            self.rho_eff.append(re)
+
+    def sr(self, r, active, pdf: bool = False):
+        """S_r(r) per wavelength (world units), or with ``pdf`` its density as a
+        distribution over the plane (S_r / rho_eff)."""
+        def one(k):
+            rows, wr, ok = self.rows[k]
+            st = self.sigma_t[k]
+            r_opt = r * st
+            p, ok2 = _profile(self.tab, rows, wr, r_opt, ok & active)
+            v = dr.select(r_opt > 0, p / (2.0 * math.pi * dr.maximum(r_opt, 1e-30)), p) * st * st
+            if pdf:
+                re = self.rho_eff[k]
+                v = v / dr.select(re > 0, re, 1.0)
+            return dr.select(ok2, dr.maximum(v, 0.0), 0.0)
+        return _spectral(one)
 
 
 @dr.syntax
@@ -332,11 +346,13 @@ def _newton_bisection(F, target, active):
     return t
 
 
-def sample_sr(tab, inst, rho0, u, active):
-    """An optical radius sampled from the profile of albedo ``rho0`` (pbrt-v4's
+def sample_sr(prof: Profile, u, active):
+    """An optical radius sampled from the hero wavelength's profile (pbrt-v4's
     ``SampleCatmullRom2D``): invert the interpolated running integral, then the cubic
     on its segment."""
-    rows, wr, ok = _rows(tab, inst, rho0, active)
+    tab = prof.tab
+    rows, wr, ok = prof.rows[0]
+    ok = ok & active
     total = _interp_rows(tab.cdf, rows, wr, mi.UInt32(N_RADIUS - 1), ok)
     u = u * total
     i = mi.UInt32(0)
@@ -393,7 +409,7 @@ def probe_frame(n):
     return mi.Frame3f(n)
 
 
-def sample_probe(tab, inst, po, n, sigma_t, rho, u1, u2, active):
+def sample_probe(prof: Profile, po, n, u1, u2, active):
     """pbrt-v4's ``SampleSp``: a probe segment (p0, p1) through the sphere around ``po``
     bounding the profile, along a tangent (probability 1/4 each) or the normal (1/2), at
     a radius sampled from the hero wavelength's profile; and the lanes that have one."""
@@ -402,10 +418,10 @@ def sample_probe(tab, inst, po, n, sigma_t, rho, u1, u2, active):
     axis = dr.select(along_s, fr.s, dr.select(along_t, fr.t, fr.n))
     ex = dr.select(along_s, fr.t, dr.select(along_t, fr.n, fr.s))
     ey = dr.select(along_s, fr.n, dr.select(along_t, fr.s, fr.t))
-    s0 = sigma_t[0]
+    s0 = prof.sigma_t[0]
     ok = active & (s0 > 0)
-    r, ok = sample_sr(tab, inst, rho[0], u2.x, ok)
-    r_max, ok = sample_sr(tab, inst, rho[0], mi.Float(R_MAX_U), ok)
+    r, ok = sample_sr(prof, u2.x, ok)
+    r_max, ok = sample_sr(prof, mi.Float(R_MAX_U), ok)
     ok &= r < r_max
     r, r_max = r / s0, r_max / s0
     l = 2.0 * dr.safe_sqrt(r_max * r_max - r * r)  # noqa: E741
@@ -415,7 +431,7 @@ def sample_probe(tab, inst, po, n, sigma_t, rho, u1, u2, active):
     return p0, p0 + l * axis, ok
 
 
-def pdf_sp(tab, inst, po, n_o, pi, n_i, sigma_t, rho, active):
+def pdf_sp(prof: Profile, po, n_o, pi, n_i, active):
     """pbrt-v4's ``PDF_Sp``: the density (per area at the exit point) of finding ``pi``
     (normal ``n_i``) with :func:`sample_probe`'s three axes, per wavelength."""
     fr = probe_frame(n_o)
@@ -426,7 +442,7 @@ def pdf_sp(tab, inst, po, n_o, pi, n_i, sigma_t, rho, active):
              dr.sqrt(dl.x * dl.x + dl.y * dl.y))
     out = mi.Spectrum(0.0)
     for a in range(3):
-        out += sr(tab, inst, sigma_t, rho, radii[a], active, pdf=True) * (dr.abs(nl[a]) * AXIS_PROB[a])
+        out += prof.sr(radii[a], active, pdf=True) * (dr.abs(nl[a]) * AXIS_PROB[a])
     return out
 
 
