@@ -38,7 +38,7 @@ from pbr.scene.xml import to_xml
 
 # Gallery cells Mitsuba 3.9 cannot load (pbrt-v4 features); tests/test_gallery.py checks
 # that each one fails there.
-NOT_IN_MITSUBA = ("dispersive BK7", "coateddiffuse", "coatedconductor", "diffusetransmission")
+NOT_IN_MITSUBA = ("dispersive BK7", "coateddiffuse", "coatedconductor", "diffusetransmission", "subsurface")
 
 
 def _T():

@@ -26,6 +26,7 @@ NOT_IN_MITSUBA = {
     "coateddiffuse": "pbrt-v4's layered BSDF",
     "coatedconductor": "pbrt-v4's layered BSDF (and its 'interface.roughness' key)",
     "diffusetransmission": "pbrt-v4's BSDF",
+    "subsurface": "pbrt-v4's BSSRDF",
 }
 
 

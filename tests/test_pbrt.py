@@ -213,7 +213,8 @@ def test_gzip_ply_and_gz_scene(tmp_path):
     ('Include "missing.pbrt"', r"scene.pbrt:7: Include: file not found: 'missing.pbrt'"),
     ('Camera "perspective"', r"scene.pbrt:7: Camera: must come before WorldBegin"),
     ('LightSource "point" "rgb I" [1 1]', r"scene.pbrt:7: LightSource: parameter 'I' \(rgb\) needs a multiple of 3"),
-    ('Material "subsurface"', r"scene.pbrt:7: Material: material 'subsurface' \(no BSSRDF in pbr\) is not supported"),
+    ('Material "subsurface" "string name" "Skin1"',
+     r"scene.pbrt:7: Material: subsurface \"name\" 'Skin1' \(pbrt-v4's named scattering coefficients\) is not supported"),
     ('Shape "sphere" "float radius" "one"', r"scene.pbrt:7: Shape: parameter 'radius' \(float\) expects numbers"),
 ])
 def test_errors_name_file_line_and_directive(tmp_path, body, pattern):
@@ -237,8 +238,12 @@ def test_loader_errors_get_file_line(tmp_path):
 
 
 def test_approximate_notes_instead_of_errors(tmp_path):
+    # Mitsuba 3 has no BSSRDF: for Mitsuba, pbrt-v4's subsurface becomes a coated diffuse
+    # surface (pbr's own subsurface: tests/test_subsurface.py).
     path = write(tmp_path, HEAD + 'WorldBegin\nMaterial "subsurface" "rgb reflectance" [0.5 0.4 0.3]\nShape "sphere"\n')
-    d, notes, _ = convert(path, approximate=True)
+    with pytest.raises(XMLError, match=r"scene.pbrt:7: Material: material 'subsurface' \(Mitsuba 3 has no BSSRDF\)"):
+        convert(path, mitsuba=True)
+    d, notes, _ = convert(path, approximate=True, mitsuba=True)
     assert d["material_0001"]["bsdf"]["type"] == "coateddiffuse"
     assert any("scene.pbrt:7" in n and "subsurface" in n for n in notes)
 

@@ -146,6 +146,7 @@ GALLERY_MATERIALS = [
     ("principledthin", {"type": "principledthin", "base_color": {"type": "rgb", "value": [0.2, 0.7, 0.3]},
                         "spec_trans": 0.5, "roughness": 0.4}),
     ("diffusetransmission", {"type": "diffusetransmission", "reflectance": 0.3, "transmittance": 0.5}),
+    ("subsurface", {"type": "subsurface", "reflectance": {"type": "rgb", "value": [0.8, 0.45, 0.3]}, "mfp": 0.03}),
     ("mask", {"type": "mask", "opacity": 0.5, "b": {"type": "diffuse", "reflectance": 0.8}}),
     ("blendbsdf", {"type": "blendbsdf", "weight": 0.5, "a": {"type": "diffuse", "reflectance": 0.2},
                    "b": {"type": "roughconductor", "material": "Ag", "alpha": 0.1}}),
@@ -158,7 +159,8 @@ GALLERY_MATERIALS = [
 
 def materials_gallery(resolution: int = 480, spp: int = 64, materials=None) -> dict:
     """A grid of spheres, one per BSDF family (``GALLERY_MATERIALS``; ``hair`` on a tuft of
-    fibres instead), on a diffuse floor under an area light: a Mitsuba-style scene dict."""
+    fibres instead), on a diffuse floor under an area light: a Mitsuba-style scene dict.
+    Rendered by ``path``, or ``volpath`` where a ``subsurface`` sphere needs it."""
     mats = [m for m in (materials or GALLERY_MATERIALS) if m[1]["type"] in bsdf_names()]
     backend.ensure_any()
     T = mi.ScalarTransform4f
@@ -166,7 +168,8 @@ def materials_gallery(resolution: int = 480, spp: int = 64, materials=None) -> d
     rows = (len(mats) + cols - 1) // cols
     d = {
         "type": "scene",
-        "integrator": {"type": "path", "max_depth": 12},
+        "integrator": {"type": "volpath" if any(m[1]["type"] == "subsurface" for m in mats) else "path",
+                       "max_depth": 12},
         "sensor": {"type": "perspective", "fov": 40.0,
                    "to_world": T().look_at(origin=[0, 4.5, 9.5], target=[0, 0.2, 0], up=[0, 1, 0]),
                    "sampler": {"type": "independent", "sample_count": spp},

@@ -9,6 +9,8 @@ Mitsuba's ``twosided``, ``mask``, ``blendbsdf`` (pbrt-v4's ``mix``), ``normalmap
 
 from __future__ import annotations
 
+import warnings
+
 import drjit as dr
 import mitsuba as mi
 
@@ -242,6 +244,15 @@ class BSDFSet:
                 and b == NO_BACK and o == NO_BACK for i, (t, _, b, o) in enumerate(self.entries)]
         self.null_lobe_of = mi.Bool(lobe)
         self.has_null_lobes = any(lobe)
+        # Plain ``subsurface`` entries: volpath carries light refracted into them to an
+        # exit point (integrators/subsurface.py).
+        sss = [t == "subsurface" and i not in self.blend_of and i not in self.perturb_of and b == NO_BACK
+               and o == NO_BACK for i, (t, _, b, o) in enumerate(self.entries)]
+        self.subsurface_of = mi.Bool(sss)
+        self.has_subsurface = any(sss)
+        if any(t == "subsurface" and not p for (t, _, _, _), p in zip(self.entries, sss)):
+            warnings.warn("subsurface inside twosided, mask, a blend or a normal/bump map: rendered as its "
+                          "dielectric boundary only (no subsurface transport)", RuntimeWarning, stacklevel=2)
 
     def smooth(self, bsdf_id, active, regularize=None):
         """True where the entry has a non-delta lobe (worth sampling a light for), and
@@ -289,6 +300,12 @@ class BSDFSet:
                 on = lanes & (fam_of == self.order.index(t))
                 out = dr.select(on, fam.null_transmission(ctx, local, on), out)
         return out
+
+    def subsurface(self, bsdf_id, active):
+        """(lanes at a plain ``subsurface`` entry, the ``subsurface`` family, its instance
+        index on those lanes); only called when :attr:`has_subsurface`."""
+        lanes = active & dr.gather(mi.Bool, self.subsurface_of, bsdf_id, active)
+        return lanes, self.families["subsurface"], dr.gather(mi.UInt32, self.local_of, bsdf_id, lanes)
 
     @property
     def dispersive(self) -> bool:

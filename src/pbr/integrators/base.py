@@ -465,7 +465,9 @@ class ConditionalState:
         self.fixed = {k: v for k, (v, changes) in entries.items() if not changes}
 
     def values(self, state: dict) -> tuple:
-        return tuple(state[k] if k in state else self.fixed[k] for k in self.names)
+        # Constants are handed out as new references, so that a masked assignment in the
+        # body (x[mask] = ...) cannot change them for the next iteration.
+        return tuple(state[k] if k in state else type(self.fixed[k])(self.fixed[k]) for k in self.names)
 
     def update(self, **values) -> dict:
         return {k: values[k] for k in self.names if k in self.state}

@@ -14,7 +14,7 @@ import mitsuba as mi
 from ..bsdfs.base import ShadingContext, shading_context
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..spectrum import first_only
-from . import volume
+from . import subsurface, volume
 from .base import INTEGRATORS, ConditionalState, SamplingIntegrator, depth_limit, mis_state, path_state
 
 
@@ -191,6 +191,78 @@ class VolPathIntegrator(_MediumAware):
         r_u[in_m] = r_u * f
         return T_ray, r_u, r_l, n_null
 
+    # -- vertices ---------------------------------------------------------------------------
+    @staticmethod
+    def _vertex_lobe(scene, bsdf_id, ctx, active, medium, ray, sc):
+        """The scattering function of a path vertex for :meth:`_next_event`: the BSDF of
+        entry ``bsdf_id`` (evaluated toward the light and sampled at once), the medium's
+        phase function on medium lanes ``sc``."""
+        def lobe(wo_em, ls, u1, u2):
+            f_em, pdf_em, bs = scene.bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, active)
+            if len(scene.media) > 0:
+                f_em, pdf_em = volume.phase_nee(scene.media, medium, ray, ls.wi, sc, f_em, pdf_em)
+            return f_em, pdf_em, bs
+        return lobe
+
+    def _next_event(self, scene, rng, wl, ref, si, shape, sc, p_sc, medium, nee, rs, L, beta, r_u, lobe):
+        """Light sampling from a vertex ``ref`` (:func:`.volume.nee_reference`: ``p_sc`` on
+        medium lanes ``sc``, the surface ``si`` of ``shape`` elsewhere) on lanes ``nee``
+        (``rs``: those at surfaces), with the spectral MIS weight against ``lobe``'s density; ``lobe(wo, ls, u1, u2)`` gives
+        (f |cos|, pdf) toward the light and a sample of the next direction. Returns (L
+        with the light added, that sample)."""
+        lights, media = scene.lights, scene.media
+        u_light = rng.next_float32()
+        u_pos = rng.next_2d()
+        ls = lights.sample_Li(self.light_sampler, ref, u_light, u_pos, wl, nee)
+        nee &= ls.pdf > 0
+        wo_em = si.to_local(ls.wi)
+        u1 = rng.next_float32()
+        u2 = rng.next_2d()
+        f_em, pdf_em, bs = lobe(wo_em, ls, u1, u2)
+        sray, s_med = volume.shadow_ray(scene, shape, si, ls, sc, p_sc, medium, nee & rs)
+        if len(media) > 0:
+            T_ray, tr_u, tr_l, n_shadow = volume.transmittance(
+                scene, sray, ls.p, s_med, nee, (mi.Spectrum(1.0), mi.Spectrum(1.0), mi.Spectrum(1.0), mi.UInt32(0)),
+                self._shadow_segment, (media, rng, wl), wl=wl)
+        else:
+            # Without media only T changes along the shadow ray (null surfaces).
+            T_ray, = volume.transmittance(scene, sray, ls.p, s_med, nee, (mi.Spectrum(1.0),),
+                                          self._shadow_segment, (media, rng, wl), wl=wl)
+            tr_u, tr_l = 1.0, 1.0
+        rl_nee = r_u * ls.pdf * tr_l
+        ru_nee = r_u * pdf_em * tr_u
+        d_nee = dr.select(ls.delta, dr.mean(rl_nee), dr.mean(rl_nee + ru_nee))
+        L[nee] = L + beta * f_em * T_ray * ls.L * dr.rcp(d_nee)
+        return L, bs
+
+    def _subsurface(self, scene, rng, wl, si, bsdf_id, bs, sss, L, beta, r_u, r_l, eta, prev_p, prev_n,
+                    prev_delta, ray, medium, cont):
+        """Lanes ``sss`` refracted into a surface (sample ``bs``), where it has a
+        ``subsurface`` material: move the path to an exit point found by a probe ray,
+        weighted by the BSSRDF's profile over its density (r_u by each wavelength's
+        density over the hero's), sample the lights and the next direction there with the
+        exit lobe S_w. Lanes with no exit point end. Returns the updated path state."""
+        sss, found, si_x, shape_x, w_sp, ru_sp, eta_x = subsurface.probe(scene, rng, si, bsdf_id, wl, sss)
+        beta[found] = beta * w_sp
+        r_u[found] = r_u * ru_sp
+        no = mi.Bool(False)
+        ref = volume.nee_reference(si_x, no, si_x.p)
+        L, bs_x = self._next_event(scene, rng, wl, ref, si_x, shape_x, no, si_x.p, medium, found, found, L, beta, r_u,
+                                   subsurface.exit_lobe(eta_x, found))
+        go = found & (bs_x.pdf > 0)
+        beta[found] = beta * bs_x.weight
+        r_l[found] = r_u * dr.rcp(bs_x.pdf)
+        eta[found] = eta * dr.rcp(bs.eta)       # back outside
+        prev_p[found] = si_x.p
+        prev_n[found] = si_x.n
+        prev_delta[found] = False
+        wi = si_x.to_world(bs_x.wo)
+        ray = dr.select(found, si_x.spawn_ray(wi), ray)
+        if len(scene.media) > 0:
+            medium = volume.enter(scene, shape_x, si_x, wi, medium, found)
+        cont = dr.select(sss, go, cont)
+        return L, beta, r_u, r_l, eta, prev_p, prev_n, prev_delta, ray, medium, cont
+
     # -- the estimator --------------------------------------------------------------------
     @dr.syntax
     def _sample(self, scene, rng, ray, wl, active):
@@ -207,7 +279,9 @@ class VolPathIntegrator(_MediumAware):
         # Without media the spectral MIS ratio r_u (1), the null-collision count and the
         # medium index (vacuum) never change: they are loop state only with media.
         terminated = mi.Bool(False) if bsdfs.dispersive else None
-        cond = ConditionalState(r_u=(mi.Spectrum(1.0), has_media), n_null=(mi.UInt32(0), has_media),
+        # (A subsurface exit rescales r_u too.)
+        cond = ConditionalState(r_u=(mi.Spectrum(1.0), has_media or bsdfs.has_subsurface),
+                                n_null=(mi.UInt32(0), has_media),
                                 medium=(mi.UInt32(self._medium), has_media))
         cond_state = cond.state
         # pbrt-v4's regularisation: on after the first non-specular bounce (state only with it)
@@ -275,31 +349,8 @@ class VolPathIntegrator(_MediumAware):
             smooth = rs & bsdfs.smooth(bsdf_id, rs, nonspecular)
             nee = smooth | sc
             ref = volume.nee_reference(si, sc, p_sc)
-            u_light = rng.next_float32()
-            u_pos = rng.next_2d()
-            ls = lights.sample_Li(self.light_sampler, ref, u_light, u_pos, wl, nee)
-            nee &= ls.pdf > 0
-            wo_em = si.to_local(ls.wi)
-            u1 = rng.next_float32()
-            u2 = rng.next_2d()
-            f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, rs_sample)
-            if dr.hint(has_media, mode="scalar"):
-                f_em, pdf_em = volume.phase_nee(media, medium, ray, ls.wi, sc, f_em, pdf_em)
-            sray, s_med = volume.shadow_ray(scene, shape, si, ls, sc, p_sc, medium, nee & rs)
-            if dr.hint(has_media, mode="scalar"):
-                T_ray, tr_u, tr_l, n_shadow = volume.transmittance(
-                    scene, sray, ls.p, s_med, nee,
-                    (mi.Spectrum(1.0), mi.Spectrum(1.0), mi.Spectrum(1.0), mi.UInt32(0)),
-                    self._shadow_segment, (media, rng, wl), wl=wl)
-            else:
-                # Without media only T changes along the shadow ray (null surfaces).
-                T_ray, = volume.transmittance(scene, sray, ls.p, s_med, nee, (mi.Spectrum(1.0),),
-                                              self._shadow_segment, (media, rng, wl), wl=wl)
-                tr_u, tr_l = 1.0, 1.0
-            rl_nee = r_u * ls.pdf * tr_l
-            ru_nee = r_u * pdf_em * tr_u
-            d_nee = dr.select(ls.delta, dr.mean(rl_nee), dr.mean(rl_nee + ru_nee))
-            L[nee] = L + beta * f_em * T_ray * ls.L * dr.rcp(d_nee)
+            L, bs = self._next_event(scene, rng, wl, ref, si, shape, sc, p_sc, medium, nee, rs, L, beta, r_u,
+                                     self._vertex_lobe(scene, bsdf_id, ctx, rs_sample, medium, ray, sc))
 
             # -- continue: sample the BSDF or the phase function -------------------------
             wi_next, pdf_next, w_next, delta_next = volume.sample_direction(media, medium, ray, si, bs, sc, rng)
@@ -321,6 +372,13 @@ class VolPathIntegrator(_MediumAware):
                 nonspecular |= cont & ~delta_next     # a glossy or diffuse bounce, or a medium scattering
             ray, medium = volume.next_ray(scene, shape, si, ray, medium, wi_next, p_sc, sc, cont, rs, skip)
             depth[at_vertex] = depth + 1
+            if dr.hint(bsdfs.has_subsurface, mode="scalar"):
+                # Light refracted into a subsurface material leaves at an exit point found
+                # by a probe ray (pbrt-v4's VolPathIntegrator; no bounce is counted).
+                sss = cont & rs & (bs.wo.z * si.wi.z < 0)
+                L, beta, r_u, r_l, eta, prev_p, prev_n, prev_delta, ray, medium, cont = self._subsurface(
+                    scene, rng, wl, si, bsdf_id, bs, sss, L, beta, r_u, r_l, eta, prev_p, prev_n, prev_delta, ray,
+                    medium, cont)
 
             # Russian roulette on the MIS-weighted throughput (detached probability).
             rr_w = dr.max(beta * dr.rcp(dr.mean(r_u))) * eta * eta

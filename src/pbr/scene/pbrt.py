@@ -41,6 +41,7 @@ import tempfile
 import numpy as np
 
 from .. import backend
+from ..bsdfs import BSDF_TYPES
 from ..cameras import SENSORS
 from ..films import FILMS, camera_sensors
 from ..filters import FILTERS
@@ -1348,13 +1349,31 @@ class PBRTScene:
             if t == "diffusetransmission":
                 return b
             return two(b)
-        if t == "subsurface":
-            self.unsupported(p.d, "material 'subsurface' (no BSSRDF in pbr): a coated diffuse surface is used")
+        if t == "subsurface" and not self.pbr_plugin(BSDF_TYPES, "subsurface"):
+            self.unsupported(p.d, "material 'subsurface' (Mitsuba 3 has no BSSRDF): a coated diffuse surface is used")
             for q in p.d.params:
                 q.used = True
             refl = p.value("reflectance", 0.5) if p.has("reflectance") else 0.5
             return two({"type": "coateddiffuse", "reflectance": refl,
                         "eta": p.one("eta", "float", 1.33)})
+        if t == "subsurface":
+            # pbr's subsurface takes pbrt-v4's parameters; only its medium table is missing.
+            b = {"type": "subsurface"}
+            if p.has("name"):
+                self.unsupported(p.d, f"subsurface \"name\" {p.string('name')!r} (pbrt-v4's named scattering "
+                                      "coefficients): a material with pbrt-v4's default coefficients is used")
+            for q in p.d.params:
+                if q.name in ("type", "displacement", "normalmap", "name"):
+                    continue
+                q.used = True
+                if q.name == "remaproughness":
+                    b[q.name] = bool(q.values[0])
+                elif q.name in ("scale", "eta", "g"):
+                    b[q.name] = float(p.one(q.name, "float", None))
+                else:
+                    kind = "albedo" if q.name == "reflectance" else ("float" if "roughness" in q.name else "unbounded")
+                    b[q.name] = self.spectrum_value(q, p, kind)
+            return b
         if t in ("", "none"):
             return {"type": "null"}
         raise p.error(None, f"unknown material {t!r} (pbrt-v4's: diffuse, conductor, dielectric, thindielectric, "
