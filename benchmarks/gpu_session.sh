@@ -20,6 +20,7 @@ set -u
 #   NWORKERS    pytest-xdist workers (default 12)
 #   PYTEST_ARGS what pytest runs (default: tests, and then the triage runs beside it)
 #   BENCHES     which benchmarks (default: cornell scenes optim volpath)
+#   SCENES_ARGS bench_scenes' scene choice (default --quick; empty: all 31), SCENES_S its limit (240 s)
 phases=${*:-tests bench}
 test_s=${TEST_S:-330}
 OUT=${OUT:-out/gpu}
@@ -62,7 +63,7 @@ for phase in $phases; do
     for b in ${BENCHES:-cornell scenes optim volpath}; do
       case $b in
       cornell) bench bench_cornell 90 benchmarks/bench_cornell.py --res 1024 --spp 256 --reps 3 ;;
-      scenes) bench bench_scenes 240 benchmarks/bench_scenes.py --res 512 --spp 64 --reps 3 --quick ;;
+      scenes) bench bench_scenes ${SCENES_S:-240} benchmarks/bench_scenes.py --res 512 --spp 64 --reps 3 ${SCENES_ARGS---quick} ;;
       optim) bench bench_optim 80 benchmarks/bench_optim.py --res 1024 --spp 16 --reps 5 --no-children ;;
       volpath) bench bench_volpath 80 benchmarks/bench_volpath.py --res 512 --spp 64 --ref-spp 1024 --reps 3 ;;
       esac
