@@ -213,8 +213,8 @@ def test_gzip_ply_and_gz_scene(tmp_path):
     ('Include "missing.pbrt"', r"scene.pbrt:7: Include: file not found: 'missing.pbrt'"),
     ('Camera "perspective"', r"scene.pbrt:7: Camera: must come before WorldBegin"),
     ('LightSource "point" "rgb I" [1 1]', r"scene.pbrt:7: LightSource: parameter 'I' \(rgb\) needs a multiple of 3"),
-    ('Material "subsurface" "string name" "Skin1"',
-     r"scene.pbrt:7: Material: subsurface \"name\" 'Skin1' \(pbrt-v4's named scattering coefficients\) is not supported"),
+    ('Material "subsurface" "string name" "Skin9"',
+     r"scene.pbrt:7: Material: parameter 'name': unknown measured medium 'Skin9' \(did you mean 'Skin[12]'"),
     ('Shape "sphere" "float radius" "one"', r"scene.pbrt:7: Shape: parameter 'radius' \(float\) expects numbers"),
 ])
 def test_errors_name_file_line_and_directive(tmp_path, body, pattern):
@@ -881,3 +881,16 @@ Shape "trianglemesh" "point3 P" [-1 -1 0 1 -1 0 1 1 0 -1 1 0] "integer indices" 
         vals.append(luminance(render_mean(path)).mean())
     srgb = ((128 / 255 + 0.055) / 1.055) ** 2.4
     np.testing.assert_allclose(vals, [128 / 255, srgb], rtol=0.03)
+
+
+def test_subsurface_named_coefficients(tmp_path):
+    """pbrt-v4's subsurface "name": the measured coefficients (pbr.media.presets, mm^-1)
+    replace sigma_a/sigma_s and g (noted); scale stays."""
+    path = write(tmp_path, HEAD + 'WorldBegin\nMaterial "subsurface" "string name" "Skin1" "float scale" 10 '
+                                  '"float g" 0.5\nShape "sphere"\n')
+    d, notes, _ = convert(path)
+    b = next(v for v in d.values() if isinstance(v, dict) and v.get("type") == "subsurface")
+    assert b["type"] == "subsurface" and b["scale"] == 10.0 and "g" not in b
+    assert b["sigma_a"]["value"] == [0.032, 0.17, 0.48] and b["sigma_s"]["value"] == [0.74, 0.88, 1.01]
+    assert any("replaces 'g'" in n for n in notes)
+    assert np.isfinite(np.asarray(pbr.render(pbr.load_dict(d), spp=1))).all()

@@ -1357,13 +1357,25 @@ class PBRTScene:
             return two({"type": "coateddiffuse", "reflectance": refl,
                         "eta": p.one("eta", "float", 1.33)})
         if t == "subsurface":
-            # pbr's subsurface takes pbrt-v4's parameters; only its medium table is missing.
+            # pbr's subsurface takes pbrt-v4's parameters.
             b = {"type": "subsurface"}
+            skip = {"type", "displacement", "normalmap", "name"}
             if p.has("name"):
-                self.unsupported(p.d, f"subsurface \"name\" {p.string('name')!r} (pbrt-v4's named scattering "
-                                      "coefficients): a material with pbrt-v4's default coefficients is used")
+                # pbrt-v4: the measured coefficients (mm^-1, reduced scattering) replace
+                # sigma_a/sigma_s and force g = 0; scale still applies.
+                name = p.string("name")
+                coeffs = measured_scattering(name)
+                if coeffs is None:
+                    raise p.error("name", f"unknown measured medium {name!r}{did_you_mean(name, MEASURED_SCATTERING)} "
+                                          f"(pbrt-v4's: {', '.join(MEASURED_SCATTERING)})")
+                b["sigma_a"], b["sigma_s"] = ({"type": "rgb", "value": list(c)} for c in coeffs)
+                for k in ("sigma_a", "sigma_s", "g", "reflectance", "mfp"):
+                    if p.has(k):
+                        p.p[k].used = True
+                        self.note(p.p[k].where, f"Material: subsurface \"name\" {name!r} replaces {k!r} (as in pbrt-v4)")
+                skip |= {"sigma_a", "sigma_s", "g", "reflectance", "mfp"}
             for q in p.d.params:
-                if q.name in ("type", "displacement", "normalmap", "name"):
+                if q.name in skip:
                     continue
                 q.used = True
                 if q.name == "remaproughness":
