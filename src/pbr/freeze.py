@@ -11,7 +11,15 @@ its Mitsuba geometry, and pbr's spectral tables.
 
 Within a frozen function, ``params.update()`` must take its values-only path (a BSDF's
 constant or bitmap texture, or its ``eta``; see :meth:`pbr.SceneParameters.update`): a full rebuild reads
-parameters on the host, which a recording cannot replay. Seeds are passed as
+parameters on the host, which a recording cannot replay. Geometry is the exception:
+moved vertices or transforms are assigned inside the recording, and ``pbr.freeze``
+rebuilds Mitsuba's acceleration structure (Embree's BVH is built on the host) after each
+call, recorded or replayed, for every shape whose geometry arrays the call replaced
+(compared by Dr.Jit variable index: a replay writes its outputs back into the shapes).
+The next call's recording reads the new acceleration handle and arrays as inputs
+(Mitsuba's scene is traversable: its Embree/OptiX handle is a ``UInt64`` variable). So a
+frozen step renders first and moves the geometry last (after ``opt.step()``); a ray
+traced after the update within the same call raises an error. Seeds are passed as
 ``mi.UInt32`` (``dr.opaque(mi.UInt32, i)``), not Python ints, which would be recorded as
 constants (one recording per seed). ``dr.freeze``'s inputs also include every live
 Mitsuba shape of the process (the registry its ray-tracing calls can reach): another
@@ -23,11 +31,12 @@ from __future__ import annotations
 
 import functools
 import gc
+import weakref
 
 import drjit as dr
 
 from . import samplers, spectrum
-from .scene.params import SceneParameters
+from .scene.params import SceneParameters, geometry_deferred, traverse
 from .scene.scene import Scene
 from .plugins.tables import map_tables
 from .integrators.base import SamplingIntegrator
@@ -51,7 +60,9 @@ def scene_state(scene: Scene) -> list:
             scene.mi_scene]
 
 
-def _state(args, kwargs) -> list:
+def _scenes(args, kwargs) -> list:
+    """The pbr scenes among a call's arguments (directly, in containers, or as
+    ``SceneParameters``), each once."""
     scenes, seen = [], set()
 
     def find(x):
@@ -69,7 +80,11 @@ def _state(args, kwargs) -> list:
 
     find(args)
     find(kwargs)
-    return [scene_state(s) for s in scenes] + [spectrum.tables(), samplers.tables()]
+    return scenes
+
+
+def _state(args, kwargs) -> list:
+    return [scene_state(s) for s in _scenes(args, kwargs)] + [spectrum.tables(), samplers.tables()]
 
 
 def freeze(fn=None, **kwargs):
@@ -91,20 +106,66 @@ class _Frozen:
     """The frozen function, called with Python's cyclic garbage collector paused: a
     collection during a recording can release arrays made before it (e.g. NumPy buffers
     mapped by an earlier render), whose release Dr.Jit cannot record (it aborts the
-    process). Other attributes (``n_recordings``, ...) are ``dr.freeze``'s."""
+    process). After each call, the geometry the call moved is rebuilt (module
+    docstring). Other attributes (``n_recordings``, ...) are ``dr.freeze``'s."""
 
     def __init__(self, fn, frozen):
         self._frozen = frozen
+        self._params = weakref.WeakKeyDictionary()   # scene -> its SceneParameters
         functools.update_wrapper(self, fn)
 
     def __call__(self, *args, **kwargs):
+        # Inside another frozen function, this one is part of its recording (which
+        # rebuilds the geometry after its own call).
+        scenes = [] if dr.flag(dr.JitFlag.FreezingScope) else _scenes(args, kwargs)
+        before = [self._geometry(s) for s in scenes]
         enabled = gc.isenabled()
         gc.disable()
         try:
-            return self._frozen(*args, **kwargs)
+            with geometry_deferred():
+                out = self._frozen(*args, **kwargs)
+        except BaseException:
+            self._rebuild(scenes, before, restore=True)
+            raise
         finally:
             if enabled:
                 gc.enable()
+        self._rebuild(scenes, before)
+        return out
+
+    # The keys whose change needs the acceleration structure rebuilt (normals and uvs are
+    # read by the kernels from the shapes' arrays, inputs of the recording).
+    PLACING_KEYS = ("vertex_positions", "to_world", "faces")
+
+    def _geometry(self, scene) -> dict:
+        """Geometry key -> (the Dr.Jit variable indices of its current value, the value),
+        for the keys that place the shapes."""
+        params = self._params.get(scene)
+        if params is None:
+            params = self._params[scene] = traverse(scene)
+        out = {}
+        for k, p in params._params.items():
+            if p.kind == "geometry" and k.rsplit(".", 1)[-1] in self.PLACING_KEYS:
+                v = p.get()      # (a view of the shape's member: keep its own handle)
+                out[k] = (tuple(dr.detail.collect_indices(v)), type(v)(v))
+        return out
+
+    def _rebuild(self, scenes, before, restore=False) -> None:
+        """Let Mitsuba rebuild the shapes whose geometry arrays the call replaced (and its
+        acceleration structure), then pbr what depends on them (``params.update()``).
+        ``restore``: the call failed (its arrays may be unfinished): put back the
+        arrays of before the call instead."""
+        for scene, old in zip(scenes, before):
+            scene.geometry.stale = ()
+            now = self._geometry(scene)
+            changed = [k for k, (ids, _) in now.items() if old[k][0] != ids]
+            if changed:
+                params = self._params[scene]
+                for k in changed:
+                    if restore:
+                        params._params[k].mp[k] = old[k][1]
+                    params.set_dirty(k)
+                params.update()
 
     def __getattr__(self, name):
         return getattr(self._frozen, name)

@@ -221,6 +221,10 @@ class Geometry:
     pointer is empty on instance hits), so every instance has its shapes' BSDFs and
     media, as in Mitsuba."""
 
+    #: Geometry keys updated inside the frozen call being recorded, whose acceleration
+    #: structure ``pbr.freeze`` rebuilds after the call: ray queries refuse until then.
+    stale: tuple = ()
+
     def __init__(self, shapes: list, groups: dict | None = None, instances: list | None = None):
         groups, instances = groups or {}, instances or []
         d = {"type": "scene"}
@@ -318,6 +322,7 @@ class Geometry:
         surface (its ``compute_surface_interaction`` without ``FollowShape``). The ray
         query itself stays detached; ``ray_ad``: the same ray attached to a camera pose
         (the hit is then recomputed along it)."""
+        self.check_current()
         with dr.suspend_grad():
             pi = self.mi_scene.ray_intersect_preliminary(ray, False, active)
         hit = active & pi.is_valid()
@@ -336,5 +341,34 @@ class Geometry:
 
     def unoccluded(self, si, p: mi.Point3f, active):
         """True where the segment from ``si`` to ``p`` is free of occluders."""
+        self.check_current()
         ray = si.spawn_ray_to(p)
         return ~self.mi_scene.ray_test(ray, active)
+
+    def attach_derived(self) -> None:
+        """Inside a ``dr.freeze`` recording, before a differentiable render: recompute the
+        vertex normals of meshes whose parameters have gradients. Mitsuba derived them
+        from the positions when the geometry was updated (``parameters_changed``), maybe
+        outside the recording, and a recording's gradients stop at its inputs: the
+        normals' share of the derivative would not reach the positions. An analytic
+        shape's centre and radius are derived on the host, so its ``to_world`` cannot
+        be differentiated in a recording (refused)."""
+        for s in self.mi_scene.shapes():
+            if not s.parameters_grad_enabled():
+                continue
+            if not s.is_mesh():
+                raise NotImplementedError(
+                    f"shape {s.id()!r}: its to_world has gradients enabled inside a dr.freeze / pbr.freeze "
+                    "recording, whose gradients stop at its inputs: Mitsuba derives the shape's centre and "
+                    "radius from to_world on the host (parameters_changed), outside the recording; "
+                    "differentiate a mesh's vertex_positions in a frozen step, or run this step unfrozen")
+            if s.has_vertex_normals():
+                s.recompute_vertex_normals()
+
+    def check_current(self):
+        if self.stale:
+            raise RuntimeError(
+                f"a ray is traced after params.update() of {', '.join(self.stale)} inside the same "
+                "frozen call: pbr.freeze rebuilds the ray-tracing acceleration structure after the call "
+                "(on the host, which a recording cannot replay), so a frozen step must update the "
+                "geometry after its last render (e.g. after opt.step()) or before the call")

@@ -26,6 +26,7 @@ class DepthIntegrator(SamplingIntegrator):
         props.finish()
 
     def sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
+        scene.geometry.check_current()
         pi = scene.geometry.mi_scene.ray_intersect_preliminary(ray, False, active)
         hit = active & pi.is_valid()
         return mi.Spectrum(dr.select(hit, pi.t, 0.0)), hit
