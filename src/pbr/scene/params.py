@@ -270,6 +270,11 @@ class _GeometryParam(_Param):
         elif self.flags & int(mi.ParamFlags.NonDifferentiable) and dr.grad_enabled(value):
             raise ValueError(f"{key}: not differentiable in pbr (faces, and the geometry of emissive shapes, "
                              f"whose light tables are built on the host): disable its gradients")
+        if dr.detail.collect_indices(value) == dr.detail.collect_indices(self.get()):
+            # The same variables (e.g. params.update(opt) again with an unchanged opt):
+            # nothing changes, as in Mitsuba, which would compare the values on the host
+            # first (not possible inside dr.freeze).
+            return False
         self.mp[self.name] = value
 
 
@@ -390,6 +395,7 @@ class SceneParameters:
                 params[mkey] = _GeometryParam(self._mp, mkey, shapes[sid], sid in emissive)
         self._params = params
         self._dirty: set[str] = set()
+        self._unchanged = False    # a key was assigned the variables it held already
         self._geometry_read = False
 
     # -- mapping ----------------------------------------------------------------------
@@ -433,8 +439,10 @@ class SceneParameters:
         p = self._param(key)
         if p.flags & int(mi.ParamFlags.ReadOnly):
             raise ValueError(f"{key} is read-only in pbr (load the scene with another film to change it)")
-        p.set(key, value)
-        self._dirty.add(key)
+        if p.set(key, value) is not False:
+            self._dirty.add(key)
+        else:
+            self._unchanged = True
 
     def __delitem__(self, key):
         self._param(key)
@@ -497,6 +505,9 @@ class SceneParameters:
                 self[k] = v
         params = self._params
         dirty = {k: params[k] for k in self._dirty if k in params}
+        unchanged, self._unchanged = self._unchanged, False
+        if unchanged and not dirty:
+            return []      # only values assigned again: nothing to refresh
         geometry = [k for k, p in dirty.items() if p.kind == "geometry"]
         sensors = [k for k, p in dirty.items() if p.kind == "sensor"]
         pbr_keys = [k for k, p in dirty.items() if p.kind == "pbr"]
