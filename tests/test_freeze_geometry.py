@@ -48,10 +48,12 @@ def _shifted(v, dx):
     return dr.ravel(pos)
 
 
-def _mesh_case(obj):
+def _mesh_case(obj, integrator=None):
     """Optimise a mesh's vertex positions (smooth normals, which Mitsuba derives from
     them) toward a reference 0.3 to the left."""
-    scene = pbr.load_dict(lit_ball({"type": "obj", "filename": obj}))
+    d = lit_ball({"type": "obj", "filename": obj})
+    d["integrator"] = integrator or d["integrator"]
+    scene = pbr.load_dict(d)
     params = pbr.traverse(scene)
     ref = mi.TensorXf(np.asarray(pbr.render(scene, spp=8, seed=99)))
     key = "ball.vertex_positions"
@@ -73,6 +75,12 @@ def _mesh_case_updated_first_too(obj):
     scene, params, ref, opt, assign = _mesh_case(obj)
     assign.first_too = True
     return scene, params, ref, opt, assign
+
+
+def _projective_interior_case(obj):
+    """The mesh case with ``prb_projective`` without its boundary terms (sppp = sppi = 0:
+    the interior part records; the boundary terms are refused, below)."""
+    return _mesh_case(obj, {"type": "prb_projective", "max_depth": 3, "sppp": 0, "sppi": 0})
 
 
 def _sphere_case(_obj):
@@ -117,8 +125,10 @@ def _run(case, obj, frozen):
     return out, f, final
 
 
-@pytest.mark.parametrize("case", [_mesh_case, _mesh_case_updated_first_too, _sphere_case],
-                         ids=["mesh_vertex_positions", "mesh_updated_first_too", "sphere_to_world"])
+@pytest.mark.parametrize("case", [_mesh_case, _mesh_case_updated_first_too, _projective_interior_case,
+                                  _sphere_case],
+                         ids=["mesh_vertex_positions", "mesh_updated_first_too", "prb_projective_interior",
+                              "sphere_to_world"])
 def test_frozen_geometry_step_equals_the_unfrozen_one(ball_obj, case):
     ref_run, _, final0 = _run(case, ball_obj, False)
     run, f, final1 = _run(case, ball_obj, True)
