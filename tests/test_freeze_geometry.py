@@ -189,6 +189,31 @@ def test_geometry_updates_needing_host_tables_are_refused(ball_obj, key):
     assert key in str(cause) and "cannot be updated inside pbr.freeze" in str(cause), str(cause)
 
 
+def test_differentiating_a_sphere_pose_in_a_recording_is_refused():
+    """A sphere's centre and radius are derived from to_world on the host (outside the
+    recording, where its gradients stop): refused, not a silently zero gradient."""
+    scene = pbr.load_dict(lit_ball({"type": "sphere", "radius": 0.7}))
+    p = pbr.traverse(scene)
+    x = mi.Vector3f(0.1, 0.0, 0.0)
+    dr.enable_grad(x)
+    p["ball.to_world"] = mi.Transform4f().translate(x)
+    p.update()
+
+    @pbr.freeze
+    def f(scene, params, x):
+        img = pbr.render(scene, params, spp=1, seed=dr.opaque(mi.UInt32, 1))
+        dr.backward(dr.mean(img, axis=None))
+        return dr.grad(x)
+
+    with pytest.raises(RuntimeError) as e:      # (dr.freeze's, caused by pbr's NotImplementedError)
+        f(scene, p, x)
+    chain, err = [], e.value
+    while err is not None:
+        chain.append(str(err))
+        err = err.__cause__ or err.__context__
+    assert any("shape 'ball': its to_world has gradients enabled inside a dr.freeze" in m for m in chain), chain
+
+
 def test_projective_boundary_terms_are_refused_in_a_recording(ball_obj):
     """The boundary terms weigh edges on the host: a clear error, not Dr.Jit's."""
     scene = pbr.load_dict(lit_ball({"type": "obj", "filename": ball_obj}, "direct_projective"))

@@ -111,7 +111,8 @@ class _Frozen:
 
     def __init__(self, fn, frozen):
         self._frozen = frozen
-        self._params = weakref.WeakKeyDictionary()   # scene -> its SceneParameters
+        # scene -> (its SceneParameters, the geometry keys that place its shapes)
+        self._params = weakref.WeakKeyDictionary()
         functools.update_wrapper(self, fn)
 
     def __call__(self, *args, **kwargs):
@@ -140,14 +141,15 @@ class _Frozen:
     def _geometry(self, scene) -> dict:
         """Geometry key -> (the Dr.Jit variable indices of its current value, the value),
         for the keys that place the shapes."""
-        params = self._params.get(scene)
-        if params is None:
-            params = self._params[scene] = traverse(scene)
+        if scene not in self._params:
+            params = traverse(scene)
+            self._params[scene] = params, [k for k, p in params._params.items()
+                                           if p.kind == "geometry" and k.rsplit(".", 1)[-1] in self.PLACING_KEYS]
+        params, keys = self._params[scene]
         out = {}
-        for k, p in params._params.items():
-            if p.kind == "geometry" and k.rsplit(".", 1)[-1] in self.PLACING_KEYS:
-                v = p.get()      # (a view of the shape's member: keep its own handle)
-                out[k] = (tuple(dr.detail.collect_indices(v)), type(v)(v))
+        for k in keys:
+            v = params._params[k].get()     # (a view of the shape's member: keep a handle of its own)
+            out[k] = (tuple(dr.detail.collect_indices(v)), type(v)(v))
         return out
 
     def _rebuild(self, scenes, before, restore=False) -> None:
@@ -160,7 +162,7 @@ class _Frozen:
             now = self._geometry(scene)
             changed = [k for k, (ids, _) in now.items() if old[k][0] != ids]
             if changed:
-                params = self._params[scene]
+                params = self._params[scene][0]
                 for k in changed:
                     if restore:
                         params._params[k].mp[k] = old[k][1]

@@ -347,7 +347,7 @@ class Geometry:
 
     def attach_derived(self) -> None:
         """Inside a ``dr.freeze`` recording, before a differentiable render: recompute the
-        vertex normals of meshes whose parameters have gradients. Mitsuba derived them
+        vertex normals of meshes whose positions have gradients. Mitsuba derived them
         from the positions when the geometry was updated (``parameters_changed``), maybe
         outside the recording, and a recording's gradients stop at its inputs: the
         normals' share of the derivative would not reach the positions. An analytic
@@ -356,14 +356,15 @@ class Geometry:
         for s in self.mi_scene.shapes():
             if not s.parameters_grad_enabled():
                 continue
-            if not s.is_mesh():
+            if s.is_mesh():
+                if s.has_vertex_normals() and dr.grad_enabled(s.vertex_positions_buffer()):
+                    s.recompute_vertex_normals()
+            else:
                 raise NotImplementedError(
                     f"shape {s.id()!r}: its to_world has gradients enabled inside a dr.freeze / pbr.freeze "
                     "recording, whose gradients stop at its inputs: Mitsuba derives the shape's centre and "
                     "radius from to_world on the host (parameters_changed), outside the recording; "
                     "differentiate a mesh's vertex_positions in a frozen step, or run this step unfrozen")
-            if s.has_vertex_normals():
-                s.recompute_vertex_normals()
 
     def check_current(self):
         if self.stale:
