@@ -19,7 +19,10 @@ call, recorded or replayed, for every shape whose geometry arrays the call repla
 The next call's recording reads the new acceleration handle and arrays as inputs
 (Mitsuba's scene is traversable: its Embree/OptiX handle is a ``UInt64`` variable). So a
 frozen step renders first and moves the geometry last (after ``opt.step()``); a ray
-traced after the update within the same call raises an error. Seeds are passed as
+traced after the update within the same call raises an error. A recording's gradients
+stop at its inputs, so ``pbr.render`` inside one derives the tables that depend on
+parameters with gradients again (vertex normals, BSDF value tables:
+``SceneParameters.attach_in_recording``). Seeds are passed as
 ``mi.UInt32`` (``dr.opaque(mi.UInt32, i)``), not Python ints, which would be recorded as
 constants (one recording per seed). ``dr.freeze``'s inputs also include every live
 Mitsuba shape of the process (the registry its ray-tracing calls can reach): another
