@@ -11,7 +11,10 @@ the mesh and Embree's BVH). pbr's frozen step assigns them last (the BVH is rebu
 ``pbr.freeze`` after the call); Mitsuba's frozen step is measured in both orders
 (``params.update(opt)`` first, as in Mitsuba's tutorials, or last). Reported: median
 wall time per step over ``--iters`` steps after ``--warmup``, and the number of
-recordings (``n_recordings``) of each frozen step.
+recordings (``n_recordings``) of each frozen step. Also: whether Mitsuba's frozen
+render with the update inside replays the geometry it is given (image error against the
+same render unfrozen, per call), and the gradient error of Mitsuba's step frozen with its
+update between the calls (smooth and face normals).
 
     python benchmarks/bench_freeze_geometry.py [--res 64] [--spp 16] [--iters 10] [--warmup 3]
 """
@@ -130,12 +133,13 @@ def bench_mitsuba(d, a):
                 return loss
 
             f = step if order == "none" else dr.freeze(step, warn_after=10 ** 6)
-            g = f
             if order == "outside":     # the update between the frozen calls, by hand
                 def g(*args):
                     loss = f(*args)
                     params.update(opt)
                     return loss
+            else:
+                g = f
             try:
                 ms, loss = time_steps(g, lambda i: (scene, params, opt, ref, dr.opaque(mi.UInt32, i + 1)),
                                       a.warmup, a.iters)
@@ -143,21 +147,51 @@ def bench_mitsuba(d, a):
             except RuntimeError as e:
                 cause = e.__cause__ or e
                 out[order] = str(cause).strip().splitlines()[0][:160]
-        # the render alone, with the update inside (docs/inverse.md measured this before)
-        scene, params, ref, opt = setup(mi.load_dict, mi.traverse, mi.render, md, a.spp)
-        v0 = dr.detach(params[KEY])
+        # the render alone, with the update inside, against the same render unfrozen
+        scenes = [setup(mi.load_dict, mi.traverse, mi.render, md, a.spp) for _ in range(2)]
+        v0 = dr.detach(scenes[0][1][KEY])
 
-        @dr.freeze(warn_after=10 ** 6)
         def moved_render(scene, params, dx, seed):
             params[KEY] = shifted(v0, dx)
             params.update()
             return mi.render(scene, params, spp=a.spp, seed=seed)
+        frozen = dr.freeze(moved_render, warn_after=10 ** 6)
+        errors = []
         for i in range(8):
-            moved_render(scene, params, mi.Float(0.01 * i), dr.opaque(mi.UInt32, i + 1))
-        out["render_only"] = moved_render.n_recordings
+            args = (mi.Float(0.1 * i), dr.opaque(mi.UInt32, 1))
+            img = np.asarray(frozen(*scenes[0][:2], *args))
+            errors.append(float(np.abs(img - np.asarray(moved_render(*scenes[1][:2], *args))).max()))
+        out["render_only"] = (frozen.n_recordings, errors)
+        out["split_gradients"] = {n: split_gradient_errors(d, a, n) for n in ("smooth", "face")}
         return out
     finally:
         mi.set_variant(variant)
+
+
+def split_gradient_errors(d, a, normals):
+    """Mitsuba's step frozen without its update (render, loss, backward, Adam), the update
+    between the calls: the relative error of its gradient at each step against the same
+    steps unfrozen (``normals``: the mesh's smooth vertex normals or face normals)."""
+    d = dict(d, ball=dict(d["ball"], face_normals=normals == "face"))
+    grads = []
+    for frozen in (False, True):
+        scene, params, ref, opt = setup(mi.load_dict, mi.traverse, mi.render, d, a.spp)
+
+        def step(scene, params, opt, ref, seed):
+            img = mi.render(scene, params, spp=a.spp, seed=seed)
+            loss = dr.mean(dr.square(img - ref), axis=None)
+            dr.backward(loss)
+            grad = dr.detach(dr.grad(opt[KEY]))
+            opt.step()
+            return loss, grad
+        f = dr.freeze(step, warn_after=10 ** 6) if frozen else step
+        out = []
+        for i in range(5):
+            _, grad = f(scene, params, opt, ref, dr.opaque(mi.UInt32, i + 1))
+            params.update(opt)
+            out.append(np.asarray(grad))
+        grads.append(out)
+    return [float(np.abs(g1 - g0).max() / np.abs(g0).max()) for g0, g1 in zip(*grads)]
 
 
 def main():
@@ -187,7 +221,12 @@ def main():
         ms, loss, n = r
         rec = "" if n is None else f", {n} recordings in {a.warmup + a.iters} calls"
         print(f"  {name:30s} {ms:8.1f} ms/step  (final loss {loss:.5f}{rec})")
-    print(f"  Mitsuba frozen render with the update inside (no gradient): {m['render_only']} recordings in 8 calls")
+    n, errors = m["render_only"]
+    print(f"  Mitsuba frozen render with the update inside (no gradient): {n} recordings in 8 calls; "
+          f"largest pixel error against unfrozen per call: {', '.join(f'{e:.2f}' for e in errors)}")
+    for normals, errors in m["split_gradients"].items():
+        print(f"  Mitsuba frozen, update outside, {normals} normals: gradient relative error per step "
+              f"{', '.join(f'{e:.2f}' for e in errors)}")
     print(f"  pbr geometry update alone (Mitsuba rebuild + geometry_changed): {p['update']:.1f} ms")
     sys.stdout.flush()
 

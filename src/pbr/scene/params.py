@@ -566,7 +566,7 @@ class SceneParameters:
         if bad:
             raise RuntimeError(
                 f"params.update(): {', '.join(bad)} cannot be updated inside pbr.freeze: only the "
-                f"vertex positions, normals and 'to_world' of shapes that emit no light (their change "
+                "vertex positions, normals and 'to_world' of shapes that emit no light (their change "
                 "rebuilds nothing but the acceleration structure); faces, uvs and the geometry of "
                 "emissive shapes rebuild tables on the host (update them outside the frozen function)")
         # Mitsuba's own bookkeeping of these keys: pbr.freeze rebuilds them instead.
