@@ -264,6 +264,10 @@ class Geometry:
     of the static hit and the movers' hits is taken back to world space. A scene without
     movers traces exactly the queries it traced before."""
 
+    #: Geometry keys updated inside the frozen call being recorded, whose acceleration
+    #: structure ``pbr.freeze`` rebuilds after the call: ray queries refuse until then.
+    stale: tuple = ()
+
     def __init__(self, shapes: list, groups: dict | None = None, instances: list | None = None,
                  motions: dict | None = None):
         groups, instances, motions = groups or {}, instances or [], motions or {}
@@ -396,6 +400,7 @@ class Geometry:
         surface (its ``compute_surface_interaction`` without ``FollowShape``). The ray
         query itself stays detached; ``ray_ad``: the same ray attached to a camera pose
         (the hit is then recomputed along it). Hits on moving shapes carry no derivatives."""
+        self.check_current()
         with dr.suspend_grad():
             pi = self.mi_scene.ray_intersect_preliminary(ray, False, active)
         hit = active & pi.is_valid()
@@ -467,6 +472,7 @@ class Geometry:
     def occluded(self, ray: mi.Ray3f, active):
         """True where ``ray`` hits something before its ``maxt`` (Mitsuba's ``ray_test``,
         moving shapes included)."""
+        self.check_current()
         blocked = self.mi_scene.ray_test(ray, active)
         for k, (sc, _) in enumerate(self.movers):
             blocked |= sc.ray_test(self._ray_into(k, ray, ray.maxt), active & ~blocked)
@@ -474,6 +480,7 @@ class Geometry:
 
     def nearest_distance(self, ray: mi.Ray3f, active):
         """(distance to the nearest hit, whether there is one), moving shapes included."""
+        self.check_current()
         pi = self.mi_scene.ray_intersect_preliminary(ray, False, active)
         hit = active & pi.is_valid()
         if not self.movers:
@@ -486,6 +493,35 @@ class Geometry:
         """True where the segment from ``si`` to ``p`` is free of occluders."""
         ray = si.spawn_ray_to(p)
         return ~self.occluded(ray, active)
+
+    def attach_derived(self) -> None:
+        """Inside a ``dr.freeze`` recording, before a differentiable render: recompute the
+        vertex normals of meshes whose positions have gradients. Mitsuba derived them
+        from the positions when the geometry was updated (``parameters_changed``), maybe
+        outside the recording, and a recording's gradients stop at its inputs: the
+        normals' share of the derivative would not reach the positions. An analytic
+        shape's centre and radius are derived on the host, so its ``to_world`` cannot
+        be differentiated in a recording (refused)."""
+        for s in self.mi_scene.shapes():
+            if not s.parameters_grad_enabled():
+                continue
+            if s.is_mesh():
+                if s.has_vertex_normals() and dr.grad_enabled(s.vertex_positions_buffer()):
+                    s.recompute_vertex_normals()
+            else:
+                raise NotImplementedError(
+                    f"shape {s.id()!r}: its to_world has gradients enabled inside a dr.freeze / pbr.freeze "
+                    "recording, whose gradients stop at its inputs: Mitsuba derives the shape's centre and "
+                    "radius from to_world on the host (parameters_changed), outside the recording; "
+                    "differentiate a mesh's vertex_positions in a frozen step, or run this step unfrozen")
+
+    def check_current(self):
+        if self.stale:
+            raise RuntimeError(
+                f"a ray is traced after params.update() of {', '.join(self.stale)} inside the same "
+                "frozen call: pbr.freeze rebuilds the ray-tracing acceleration structure after the call "
+                "(on the host, which a recording cannot replay), so a frozen step must update the "
+                "geometry after its last render (e.g. after opt.step()) or before the call")
 
 
 def _apply(rows, v, offset, cls):

@@ -133,6 +133,7 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
     ``(image, pbr.adaptive.AdaptiveInfo)``: per-pixel sample counts and estimated
     relative errors (with neither of the two, of a uniform ``spp`` render: the same
     samples as without it)."""
+    scene.geometry.check_current()    # (before any symbolic loop: its abort leaves Dr.Jit unclean)
     integrator = scene.integrator if integrator is None else as_integrator(integrator)
     spp, spp_grad = _count("spp", spp), _count("spp_grad", spp_grad)
     seed, seed_grad = _seed("seed", seed), _seed("seed_grad", seed_grad)
@@ -156,6 +157,8 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
         counter.report()
         return img
     p = params if params is not None else traverse(scene)
+    if dr.flag(dr.JitFlag.FreezingScope):
+        (p if isinstance(p, SceneParameters) else traverse(scene)).attach_in_recording()
     values = (p.differentiable_values() if isinstance(p, SceneParameters)
               else {k: v for k, v in p.items() if dr.grad_enabled(v)})
     if scene.bsdfs.dispersive:

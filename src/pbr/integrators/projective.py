@@ -347,9 +347,22 @@ class ProjectivePathIntegrator(PathIntegrator):
                               f"those of meshes, rectangles, spheres, disks and cylinders), so the boundary part "
                               f"of its derivative is missing", RuntimeWarning, stacklevel=4)
 
+    def _refuse_recording(self, counts) -> None:
+        """The boundary terms choose their edges with weights computed on the host (the
+        edges' projected lengths, the edge table's weights), which a ``dr.freeze``
+        recording cannot replay: refuse them there, clearly."""
+        edges = getattr(self, "edges", None)
+        if any(counts[1:]) and (edges is None or edges.count) and dr.flag(dr.JitFlag.FreezingScope):
+            raise RuntimeError(
+                f"{self.path}: the boundary terms of {self.name!r} cannot be recorded by dr.freeze / "
+                "pbr.freeze (they weigh silhouette edges on the host for the current geometry and camera); "
+                "freeze a 'prb' step (interior derivatives only), or set sppp and sppi to 0, or run this "
+                "step unfrozen")
+
     def render_backward(self, scene, grad_img, sensor=0, seed=0, spp=0, sample=None):
         self._warn_uncovered(scene)
         n_c, n_p, n_i = self._counts(scene, sensor, spp)
+        self._refuse_recording((n_c, n_p, n_i))
         if n_c:
             super().render_backward(scene, grad_img, sensor, seed, n_c)
         else:
@@ -366,6 +379,7 @@ class ProjectivePathIntegrator(PathIntegrator):
     def render_forward(self, scene, sensor=0, seed=0, spp=0, sample=None):
         self._warn_uncovered(scene)
         n_c, n_p, n_i = self._counts(scene, sensor, spp)
+        self._refuse_recording((n_c, n_p, n_i))
         if n_c:
             img = super().render_forward(scene, sensor, seed, n_c)
         else:

@@ -17,8 +17,11 @@ Three kinds of keys (``flags(key)`` tells them apart, with Mitsuba's ``mi.ParamF
   transforms then rebuild only the lights of emissive shapes and what the integrator
   derives from the geometry (``Scene.geometry_changed``), other changes every table.
   Derivatives: interior ones in ``path``/``prb``/``prbvolpath``, boundary ones (silhouettes,
-  shadows) in the projective integrators. Not inside ``pbr.freeze`` (Mitsuba rebuilds its
-  acceleration structure on the host, which a recording cannot replay).
+  shadows) in the projective integrators. Inside ``pbr.freeze``, an update of moved
+  vertices or transforms (of shapes that emit no light) only assigns the arrays: Mitsuba
+  rebuilds its acceleration structure on the host, which a recording cannot replay, so
+  ``pbr.freeze`` rebuilds it after each call (recorded or replayed), and no ray may be
+  traced in between (:func:`geometry_deferred`).
 - the sensor: ``<sensor>.to_world`` (rigid), ``x_fov`` (degrees), ``near_clip``,
   ``far_clip``, ``principal_point_offset_x``/``_y`` (a ``thinlens``: ``aperture_radius``,
   ``focus_distance`` too); the film's ``size``, ``crop_size``
@@ -71,6 +74,22 @@ from .views import variant_types
 GEOMETRY_KEYS = ("to_world", "vertex_positions", "vertex_normals", "vertex_texcoords", "faces")
 
 DIFFERENTIABLE = 0
+
+# Set while pbr.freeze calls a frozen function: it rebuilds the geometry after the call.
+_deferring = [0]
+
+
+@contextlib.contextmanager
+def geometry_deferred():
+    """Within the block (``pbr.freeze``'s call of a frozen function), ``update()`` of moved
+    vertices or transforms inside the recording assigns them and leaves Mitsuba's rebuild
+    (its acceleration structure, built on the host) to the caller, which runs it after the
+    call; until then the scene's geometry refuses ray queries (``Geometry.stale``)."""
+    _deferring[0] += 1
+    try:
+        yield
+    finally:
+        _deferring[0] -= 1
 
 
 def _flags(*names) -> int:
@@ -209,11 +228,14 @@ class _Param:
     def set(self, key, value):
         old = self.get()
         tp = type(old)
-        if type(value) is not tp:
-            try:
-                value = tp(value)
-            except Exception as e:
-                raise TypeError(f"{key}: cannot convert {type(value).__name__} to {tp.__name__}: {e}") from None
+        try:
+            # Always a handle of its own (the same variables): a replay of dr.freeze writes
+            # its outputs into nested arrays in place, and an object shared with the
+            # optimiser (params[k] = opt[k] at the end of a frozen step) was left with the
+            # old values (measured: Adam's steps lost on every replay).
+            value = tp(value)
+        except Exception as e:
+            raise TypeError(f"{key}: cannot convert {type(value).__name__} to {tp.__name__}: {e}") from None
         if dr.width(value) != dr.width(old) or getattr(value, "shape", None) != getattr(old, "shape", None):
             raise ValueError(f"{key}: shape {getattr(value, 'shape', None)} does not match {getattr(old, 'shape', None)}")
         self.owner.params[self.name] = value
@@ -233,7 +255,7 @@ class _GeometryParam(_Param):
         if emissive or mkey.endswith(".faces"):
             flags = _flags("NonDifferentiable")
         super().__init__(shape, mkey, flags)
-        self.mp = mp
+        self.mp, self.emissive = mp, emissive
 
     def get(self):
         return self.mp[self.name]
@@ -248,6 +270,11 @@ class _GeometryParam(_Param):
         elif self.flags & int(mi.ParamFlags.NonDifferentiable) and dr.grad_enabled(value):
             raise ValueError(f"{key}: not differentiable in pbr (faces, and the geometry of emissive shapes, "
                              f"whose light tables are built on the host): disable its gradients")
+        if dr.detail.collect_indices(value) == dr.detail.collect_indices(self.get()):
+            # The same variables (e.g. params.update(opt) again with an unchanged opt):
+            # nothing changes, as in Mitsuba, which would compare the values on the host
+            # first (not possible inside dr.freeze).
+            return False
         self.mp[self.name] = value
 
 
@@ -368,6 +395,7 @@ class SceneParameters:
                 params[mkey] = _GeometryParam(self._mp, mkey, shapes[sid], sid in emissive)
         self._params = params
         self._dirty: set[str] = set()
+        self._unchanged = False    # a key was assigned the variables it held already
         self._geometry_read = False
 
     # -- mapping ----------------------------------------------------------------------
@@ -411,8 +439,10 @@ class SceneParameters:
         p = self._param(key)
         if p.flags & int(mi.ParamFlags.ReadOnly):
             raise ValueError(f"{key} is read-only in pbr (load the scene with another film to change it)")
-        p.set(key, value)
-        self._dirty.add(key)
+        if p.set(key, value) is not False:
+            self._dirty.add(key)
+        else:
+            self._unchanged = True
 
     def __delitem__(self, key):
         self._param(key)
@@ -461,7 +491,9 @@ class SceneParameters:
         recomputed, with Dr.Jit operations alone (so that an update can be part of a
         ``dr.freeze``-recorded step). Sensor keys need nothing rebuilt (the next render
         reads them). Geometry keys make Mitsuba rebuild the shapes and its acceleration
-        structure (pending kernels are evaluated first: they hold a reference to it).
+        structure (pending kernels are evaluated first: they hold a reference to it);
+        inside ``pbr.freeze``, moved vertices or transforms are assigned and rebuilt after
+        the call (a ray query before then raises an error).
         Otherwise, and when nothing was assigned (e.g. after ``dr.enable_grad(params[k])``),
         the whole scene is rebuilt."""
         with backend.pbr_variant():
@@ -473,6 +505,9 @@ class SceneParameters:
                 self[k] = v
         params = self._params
         dirty = {k: params[k] for k in self._dirty if k in params}
+        unchanged, self._unchanged = self._unchanged, False
+        if unchanged and not dirty:
+            return []      # only values assigned again: nothing to refresh
         geometry = [k for k, p in dirty.items() if p.kind == "geometry"]
         sensors = [k for k, p in dirty.items() if p.kind == "sensor"]
         pbr_keys = [k for k, p in dirty.items() if p.kind == "pbr"]
@@ -486,10 +521,13 @@ class SceneParameters:
             for k in sorted(pbr_keys):
                 p = params[k]
                 check_params(p.owner, [p.name], path=k[:-len(p.name) - 1] if k.endswith("." + p.name) else None)
-        if freezing and (geometry or sensors):
+        if freezing and sensors:
             raise RuntimeError(
-                f"params.update(): {', '.join(sorted(geometry + sensors))} cannot be updated inside a "
-                "dr.freeze-recorded function (a recording replays the geometry and camera it saw)")
+                f"params.update(): {', '.join(sorted(sensors))} cannot be updated inside a "
+                "dr.freeze-recorded function (a recording replays the camera it saw)")
+        if freezing and geometry:
+            self._defer_geometry(geometry)
+            geometry = []
         rebuild, moved = False, []
         if geometry or (self._geometry_read and not freezing):
             dr.eval()                           # kernels that reference the old geometry
@@ -514,6 +552,30 @@ class SceneParameters:
         self._dirty.clear()
         return list(changed.values())
 
+    def _defer_geometry(self, keys) -> None:
+        """Inside ``pbr.freeze``: leave the rebuild of the shapes of ``keys`` (assigned
+        already) to ``pbr.freeze``, after the call; refuse what it cannot rebuild there."""
+        keys = sorted(keys)
+        if not _deferring[0]:
+            raise RuntimeError(
+                f"params.update(): {', '.join(keys)} cannot be updated inside a dr.freeze-recorded "
+                "function: Mitsuba rebuilds its ray-tracing acceleration structure on the host, which "
+                "a recording cannot replay; use pbr.freeze, which rebuilds it after each call")
+        moving = self.scene.MOVING_KEYS
+        bad = [k for k in keys if k.rsplit(".", 1)[-1] not in moving or self._params[k].emissive]
+        if bad:
+            raise RuntimeError(
+                f"params.update(): {', '.join(bad)} cannot be updated inside pbr.freeze: only the "
+                "vertex positions, normals and 'to_world' of shapes that emit no light (their change "
+                "rebuilds nothing but the acceleration structure); faces, uvs and the geometry of "
+                "emissive shapes rebuild tables on the host (update them outside the frozen function)")
+        # Mitsuba's own bookkeeping of these keys: pbr.freeze rebuilds them instead.
+        self._mp.nodes_to_update.clear()
+        self._mp.update_candidates.clear()
+        self._geometry_read = False
+        geometry = self.scene.geometry
+        geometry.stale = tuple(sorted(set(geometry.stale) | set(keys)))
+
     def _refresh_values(self, keys) -> bool:
         """Refresh the value tables of ``keys`` without a rebuild when each is a BSDF's
         constant or bitmap texture or a BSDF family's own scalar; False if one is not."""
@@ -533,6 +595,20 @@ class SceneParameters:
         for refresh in refreshes:
             refresh()
         return True
+
+    def attach_in_recording(self) -> None:
+        """Inside a ``dr.freeze`` recording, before a differentiable render: derive again,
+        with Dr.Jit operations, the tables of the parameters that have gradients (BSDF
+        value tables; meshes' vertex normals, :meth:`Geometry.attach_derived`). A
+        recording's gradients stop at its inputs, and these tables may have been derived
+        before it (by an update at the end of the previous frozen step, or outside):
+        their share of the derivative would not reach the parameters. Tables built on
+        the host (lights, media) cannot be derived again here."""
+        keys = [k for k, p in self._params.items() if p.kind == "pbr" and dr.grad_enabled(p.get())]
+        if keys:
+            self._refresh_values(keys)
+        if self.scene.geometry_requires_grad():
+            self.scene.geometry.attach_derived()
 
     # -- internal -----------------------------------------------------------------------
     def differentiable_values(self) -> dict:
