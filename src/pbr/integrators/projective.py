@@ -61,7 +61,9 @@ boundary lies on the receiver, not in a direction), non-pinhole cameras, and gui
 A perspective camera's pose (``<sensor>.to_world`` assigned with gradients) is
 differentiated too: the replay's first segment follows the attached camera rays, the
 primary term projects edges with the attached pose, and the indirect term starts from
-the attached first hit (deeper vertices slide along their detached incoming rays).
+the attached first hit. Deeper vertices slide along their detached incoming rays (they
+move with their own surface only: a discontinuity seen in a mirror does not move with the
+camera or the mirror in this term).
 """
 
 from __future__ import annotations
