@@ -102,12 +102,19 @@ class PathIntegrator(SamplingIntegrator):
         return self._sample(scene, rng, ray, wl, mode, dL, L_in, active)
 
     @dr.syntax
-    def _sample(self, scene, rng, ray, wl, mode, dL, L_in, active):
+    def _sample(self, scene, rng, ray, wl, mode, dL, L_in, active, depth0=None):
+        """``depth0``: the number of path vertices before ``ray``'s origin (per lane; 0, the
+        camera, when None): the rest of a longer path, which ``max_depth`` and Russian
+        roulette count from there (the projective integrators' radiance beside an edge)."""
         primal = mode == PRIMAL
         geo, lights, bsdfs = scene.geometry, scene.lights, scene.bsdfs
         max_depth = depth_limit(self.max_depth)
 
         ray, active, L, beta, depth, valid = path_state(ray, active, None if primal else L_in)
+        if depth0 is not None:
+            depth = mi.UInt32(depth0)
+        else:
+            depth0 = 0
         prev_p, prev_n, prev_pdf, prev_delta = mis_state(ray)
         # The loop state holds only what a bounce changes: Dr.Jit traces the body a second
         # time to drop state variables that come back unchanged (a render's largest fixed
@@ -141,7 +148,7 @@ class PathIntegrator(SamplingIntegrator):
             si, shape = geo.intersect(ray, active, attached=not primal, ray_ad=r_ad)
             hit = active & si.is_valid()
             if dr.hint(self.face_first_hit, mode="scalar"):
-                si = face_the_ray(si, ray, hit & (depth == 0))
+                si = face_the_ray(si, ray, hit & (depth == depth0))
             valid |= hit
 
             # Emission found by BSDF sampling (or seen directly), MIS-weighted.

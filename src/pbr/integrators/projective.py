@@ -18,16 +18,24 @@ silhouette curves of analytic shapes:
   on it. The jump is the radiance just beside the
   projected edge on either side (two camera rays, the integrator's own estimator with the
   same random numbers), weighted by the pixel filter of each pixel the point falls on.
-* **visibility at the first surface hit** (``sppi`` samples per pixel): from a camera
-  path's first hit x, a point y on an edge, chosen by resampled importance sampling among
+* **indirect visibility** (``sppi`` samples per pixel): from a vertex x of a camera
+  path, a point y on an edge, chosen by resampled importance sampling among
   24 candidates drawn by edge length (target: the edge measure below where the edge is a
   silhouette seen from x, larger toward emitters and where the BSDF at x is large); the
   jump is f(x, w) L_i(x, w) just beside the
   direction w = (y - x) / |y - x| on either side (L_i: the rest of the path, by the
-  integrator's estimator with one segment fewer), the normal velocity is that of the
-  direction, ((v_y - v_x) . n) / |y - x|, and the measure along the edge |e x w| / |y - x|.
-  This covers shadows of area and environment lights and, in ``prb_projective``, every
-  discontinuity of the light reaching x (indirect visibility at the first bounce).
+  integrator's estimator, ``max_depth`` counting the segments before x), the normal
+  velocity is that of the direction, ((v_y - v_x) . n) / |y - x| (x slides along its
+  incoming ray), and the measure along the edge |e x w| / |y - x|. In
+  ``direct_projective`` x is the first hit: shadows of area and environment lights. In
+  ``prb_projective`` x is a vertex at a random depth k (1 <= k < ``max_depth``, at most
+  ``indirect_depth``): the path is traced by BSDF sampling, through delta lobes (mirrors,
+  glass: nothing is projected from those), and one vertex with a non-delta lobe is kept
+  in proportion to its throughput (:meth:`ProjectivePathIntegrator._projection_vertex`),
+  the estimate weighted by the throughput of the k - 1 bounces before x over the
+  probability of choosing x. This covers every discontinuity of the light reaching any
+  vertex: an object seen in a glossy reflection (k = 1), a shadow seen in a mirror or a
+  glossy floor (k = 2), and so on.
 
 Edges (:class:`EdgeSet`): those of every triangle mesh (Mitsuba's ``cube`` included) and the
 four sides of every ``rectangle``. Vertices with equal positions are welded first, so a
@@ -44,16 +52,18 @@ a parameter t in [0, 1), like an edge, so both terms choose among edges and curv
 
 Interior derivatives are ``prb``'s, with light samples in solid angle (the direction
 toward an area light is fixed when the shading point moves), which is the measure the
-first-hit boundary term is written in. Not handled (documented in docs/inverse.md):
+indirect boundary term is written in. Not handled (documented in docs/inverse.md):
 boundaries of curves (``linearcurve``, ``bsplinecurve``) and SDF grids (a warning says so),
-discontinuities after the first bounce, hard shadows of point and spot lights (their
+hard shadows of point and spot lights (their
 boundary lies on the receiver, not in a direction), non-pinhole cameras, and guiding
 (``guiding`` and its options are accepted and ignored).
 
 A perspective camera's pose (``<sensor>.to_world`` assigned with gradients) is
 differentiated too: the replay's first segment follows the attached camera rays, the
-primary term projects edges with the attached pose, and the first-hit term starts from
-the attached hit.
+primary term projects edges with the attached pose, and the indirect term starts from
+the attached first hit. Deeper vertices slide along their detached incoming rays (they
+move with their own surface only: a discontinuity seen in a mirror does not move with the
+camera or the mirror in this term).
 """
 
 from __future__ import annotations
@@ -70,13 +80,13 @@ from ..bsdfs.base import ShadingContext
 from ..plugins.props import SceneError
 from ..samplers import IndependentSampler, IndependentStream, seed_array
 from ..spectrum import SampledWavelengths
-from .base import (BACKWARD, FORWARD, INTEGRATORS, PRIMAL, forward_derivative,
-                   max_samples_per_pass)
+from .base import (BACKWARD, FORWARD, INTEGRATORS, PRIMAL, depth_limit, forward_derivative, loop_ray,
+                   max_samples_per_pass, ray_state)
 from .path import PathIntegrator
 from .silhouettes import CurveSet, curve_kinds
 
 # Offset beside an edge at which the two sides' radiance is estimated: a fraction of a
-# pixel (primary visibility) and an angle (radians) at the first hit.
+# pixel (primary visibility) and an angle (radians) at the indirect term's vertex.
 PIXEL_EPS = 1e-3
 # Primary term: weight of a boundary's length outside the film in its probability.
 OFF_FILM = 0.01
@@ -86,14 +96,18 @@ ANGLE_EPS = 1e-4
 COPLANAR = 1e-6
 # Relative probability of edges that are silhouettes seen from an emitter's vertices.
 LIGHT_BOOST = 16.0
-# First-hit term: candidate edge points per sample (resampled importance sampling), and the
-# target's weight of directions that do not point at an emitter (x10 in prb_projective,
-# whose jumps may come from indirect light).
+# Indirect term: candidate edge points per sample (resampled importance sampling), and the
+# target's weight of directions that do not point at an emitter (x10 where the rest of the
+# path has more than one segment: jumps may come from indirect light).
 CANDIDATES = 24
-# The target also weighs a candidate by the first hit's BSDF toward it (f |cos|, mean over
+# The target also weighs a candidate by the vertex's BSDF toward it (f |cos|, mean over
 # the wavelengths) plus this floor, so that a glossy lobe's directions are preferred.
 BSDF_FLOOR = 0.01
 CONE_FLOOR = 0.02
+# Indirect term: the choice of the camera-path vertex weighs each vertex by its throughput
+# times (this floor + its BSDF sample weight), so that black surfaces are seldom chosen
+# but never ruled out (a sample weight may be 0 where the BSDF is not).
+VERTEX_FLOOR = 0.05
 
 
 def _weld(pos: np.ndarray):
@@ -274,7 +288,8 @@ def silhouette(p, a, b, c, d, has_d):
 class ProjectivePathIntegrator(PathIntegrator):
     """``prb_projective`` (Mitsuba's name and parameters): ``prb``'s path tracer whose
     derivatives w.r.t. geometry (mesh vertices, shape ``to_world``) include the boundary
-    terms of primary visibility and of visibility at the first surface hit, estimated by
+    terms of primary visibility and of indirect visibility (from a vertex of the camera
+    path at a random depth: shadows, reflections, shadows seen in reflections), estimated by
     sampling silhouette edges of meshes and silhouette curves of spheres, disks and
     cylinders (see docs/inverse.md, "Geometry"). Primal images are ``prb``'s.
 
@@ -289,7 +304,9 @@ class ProjectivePathIntegrator(PathIntegrator):
                                     otherwise the render's spp_grad (or spp) wins, then this
                                     value, then the sensor's sample count (Mitsuba's rule)
     sppp           int     -        the same for the primary-visibility boundary term
-    sppi           int     -        the same for the first-hit visibility boundary term
+    sppi           int     -        the same for the indirect-visibility boundary term
+    indirect_depth int     -1       deepest camera-path vertex the indirect term projects from
+                                    (pbr's: -1 every one max_depth allows, 1 the first hit only)
     guiding        string  octree   Mitsuba's guiding of indirect-boundary samples: accepted and
                                     ignored ('none', 'grid', 'octree'; pbr chooses edges by length)
     guiding_proj   bool    true     accepted and ignored (Mitsuba's guiding option)
@@ -314,6 +331,10 @@ class ProjectivePathIntegrator(PathIntegrator):
         props.bool("guiding_proj", True)
         props.int("guiding_rounds", 1, min=1)
         props.int("proj_seed_spp", 0, min=0)
+        self.indirect_depth = props.int("indirect_depth", -1, min=-1)
+        if self.indirect_depth == 0:
+            raise props.error("indirect_depth", "must be -1 (every vertex max_depth allows) or >= 1, got 0 "
+                                                "(sppi = 0 turns the indirect term off)")
         self._extra(props)
         props.finish()
 
@@ -374,7 +395,7 @@ class ProjectivePathIntegrator(PathIntegrator):
             self._primary(scene, sensor, seed, n_p, BACKWARD, g)
         if n_i:
             self._distr = self._edge_distribution(scene, _detached(self.edges.state()))
-            super().render_backward(scene, grad_img, sensor, _mix(seed, 2), n_i, sample=self._first_hit_boundary)
+            super().render_backward(scene, grad_img, sensor, _mix(seed, 2), n_i, sample=self._indirect_boundary)
 
     def render_forward(self, scene, sensor=0, seed=0, spp=0, sample=None):
         self._warn_uncovered(scene)
@@ -392,7 +413,7 @@ class ProjectivePathIntegrator(PathIntegrator):
             img = img + self._primary(scene, sensor, seed, n_p, FORWARD, None)
         if n_i:
             self._distr = self._edge_distribution(scene, _detached(self.edges.state()))
-            img = img + super().render_forward(scene, sensor, _mix(seed, 2), n_i, sample=self._first_hit_boundary)
+            img = img + super().render_forward(scene, sensor, _mix(seed, 2), n_i, sample=self._indirect_boundary)
         return img
 
     def _counts(self, scene, sensor, spp):
@@ -538,25 +559,41 @@ class ProjectivePathIntegrator(PathIntegrator):
                     dr.scatter_reduce(dr.ReduceOp.Add, acc, val[ch] * fw, pix * 3 + ch, inside)
         return acc
 
-    # -- visibility at the first hit -----------------------------------------------------------------
-    def _first_hit_boundary(self, scene, rng, ray, wl, mode, dL, L_in, active):
-        """Per camera sample, the boundary term of the light reflected at the first hit
-        (an estimator with the ``sample`` interface: zero in PRIMAL mode)."""
-        if mode == PRIMAL:
+    # -- indirect visibility: from a vertex of the camera path ------------------------------------
+    def _indirect_boundary(self, scene, rng, ray, wl, mode, dL, L_in, active):
+        """Per camera sample, the boundary term of the light reflected at one vertex x of
+        the camera path (the first hit, or a deeper one: :meth:`_projection_vertex`), an
+        estimator with the ``sample`` interface (zero in PRIMAL mode)."""
+        if mode == PRIMAL or self._projection_depth() < 1:     # (max_depth 1: no segment to project)
             return mi.Spectrum(0.0), mi.Bool(active)
         edges, geo, bsdfs = self.edges, scene.geometry, scene.bsdfs
-        si, shape = geo.intersect(ray, active, attached=True, ray_ad=self.primary_ray_ad)
-        hit = active & si.is_valid()
+        max_depth = depth_limit(self.max_depth)
+        if self._projection_depth() == 1:
+            # the first hit only (direct_projective, max_depth 2, indirect_depth 1): no walk
+            ray_x, depth, beta, found = ray, mi.UInt32(1), mi.Spectrum(1.0), mi.Bool(active)
+            r_ad = self.primary_ray_ad
+        else:
+            with dr.suspend_grad():
+                ray_x, depth, beta, found = self._projection_vertex(scene, rng, ray, wl, active)
+            r_ad = None
+            if self.primary_ray_ad is not None:
+                # the camera pose's gradients reach a first hit; deeper vertices slide
+                # along their detached incoming ray
+                with dr.resume_grad():
+                    r_ad = dr.select(depth == 1, self.primary_ray_ad, ray_x)
+        si, shape = geo.intersect(ray_x, found, attached=True, ray_ad=r_ad)
+        hit = found & si.is_valid()
         bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
-        on = hit & bsdfs.smooth(bsdf_id, hit) & (self.max_depth < 0 or self.max_depth > 1)
+        on = hit & bsdfs.smooth(bsdf_id, hit) & (depth < max_depth)
         S = _detached(edges.state())
         x = dr.detach(si.p)
         # Resampled importance sampling (RIS) of the edge point: CANDIDATES points drawn by
         # edge length, one kept in proportion to target / pmf, the target being the edge
         # measure of a silhouette point times (floor + 1 if its direction points at an
         # emitter's bounding sphere) times (BSDF_FLOOR + the BSDF toward it); estimate =
-        # h / target * mean(target / pmf).
-        floor = CONE_FLOOR if self.max_depth == 2 else 10 * CONE_FLOOR
+        # h / target * mean(target / pmf). The floor is small where the rest of the path
+        # is one segment (only emitters light x).
+        floor = dr.select(depth + 1 >= max_depth, CONE_FLOOR, 10 * CONE_FLOOR)
         wsum = mi.Float(0.0)
         k, t, target = mi.UInt32(0), mi.Float(0.0), mi.Float(0.0)
         si_d = dr.detach(si)
@@ -590,9 +627,9 @@ class ProjectivePathIntegrator(PathIntegrator):
             ray.d = dr.normalize(y + nw * (sgn * ANGLE_EPS * r) - ray.o)
             f, _ = bsdfs.eval_pdf(bsdf_id, ctx, si_d.to_local(ray.d), on)
             r2 = rng.copy()
-            Li = self._incident(scene, r2, ray, wl, on)
+            Li = self._incident(scene, r2, ray, wl, depth, on)
             g.append(f * Li)
-        jump = dr.select(on, (g[0] - g[1]) * weight, 0.0)
+        jump = dr.select(on, (g[0] - g[1]) * (beta * weight), 0.0)
         with dr.resume_grad():
             y_a = edges.attached(edges.state(), k, t, y_l, on)
             vn = dr.dot(y_a - si.p, dr.detach(nw)) / dr.detach(r)
@@ -601,6 +638,69 @@ class ProjectivePathIntegrator(PathIntegrator):
                 dr.backward_from(dL * term, flags=dr.ADFlag.Default | dr.ADFlag.AllowNoGrad)
                 return mi.Spectrum(0.0), mi.Bool(active)
             return forward_derivative(term), mi.Bool(active)
+
+    def _projection_depth(self) -> int:
+        """The deepest camera-path vertex the indirect term projects from: the last one
+        with a segment left (``max_depth`` - 1), at most ``indirect_depth`` (2^32 - 1:
+        unlimited, paths end by Russian roulette)."""
+        deepest = depth_limit(self.max_depth) - 1
+        if self.indirect_depth > 0:
+            deepest = min(deepest, self.indirect_depth)
+        return deepest
+
+    @dr.syntax
+    def _projection_vertex(self, scene, rng, ray, wl, active):
+        """The vertex of the camera path from which the indirect term projects: (the ray
+        whose hit it is, its depth k (1: the first hit), the camera subpath's weight,
+        whether one was found).
+
+        The path is traced by BSDF sampling (detached) up to :meth:`_projection_depth`;
+        it goes on through delta lobes (a mirror, glass), from which nothing is
+        projected since their light cannot jump across an edge direction. Among the
+        vertices with a non-delta lobe, one is kept by weighted reservoir sampling in
+        proportion to w_k = mean(beta_k) (VERTEX_FLOOR + mean(f cos / pdf at x_k)), beta_k
+        the throughput of the k - 1 bounces before it: deep vertices of a dim path, and
+        black surfaces, are rarely chosen. Its weight is beta_k / P(k), P(k) = w_k / sum w.
+        (Mitsuba's prb_projective picks the vertex uniformly among those connected to the
+        sensor by a walk from the edge: its weight is the walk's importance times their
+        count.)"""
+        geo, bsdfs = scene.geometry, scene.bsdfs
+        deepest = self._projection_depth()
+        ray_var, ray_fixed = ray_state(ray)
+        o, d, maxt = mi.Point3f(ray.o), mi.Vector3f(ray.d), mi.Float(ray.maxt)
+        depth, chosen = mi.UInt32(0), mi.UInt32(0)
+        beta, beta_w = mi.Spectrum(1.0), mi.Spectrum(0.0)
+        wsum = mi.Float(0.0)
+        active = mi.Bool(active)
+        rng_state = rng.loop_state()
+        while dr.hint(active, label="projection vertex", exclude=[ray_fixed, rng, wl]):
+            r = loop_ray(ray_var, ray_fixed)
+            rng.set_loop_state(rng_state)
+            si, shape = geo.intersect(r, active)
+            hit = active & si.is_valid()
+            bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)
+            bs = bsdfs.sample(bsdf_id, ShadingContext(si, wl), rng.next_float32(), rng.next_2d(), hit)
+            depth[hit] = depth + 1
+            can = hit & bsdfs.smooth(bsdf_id, hit)
+            w = dr.select(can, dr.mean(beta) * (VERTEX_FLOOR + dr.mean(bs.weight)), 0.0)
+            wsum += w
+            take = (w > 0) & (rng.next_float32() * wsum < w)
+            o[take], d[take], maxt[take] = r.o, r.d, r.maxt
+            chosen[take] = depth
+            beta_w[take] = beta / w
+            beta *= bs.weight
+            ray_var = ray_state(si.spawn_ray(si.to_world(bs.wo)))[0]
+            # Russian roulette (as the path tracer's, from rr_depth on)
+            b_max = dr.max(beta)
+            q = dr.minimum(b_max, 0.95)
+            rr = depth >= self.rr_depth
+            survive = rng.next_float32() < q
+            beta[rr] = beta * dr.rcp(q)
+            active = hit & (bs.pdf > 0) & (b_max > 0) & (~rr | survive) & (depth < deepest)
+            rng_state = rng.loop_state()
+        rng.set_loop_state(rng_state)
+        found = chosen > 0
+        return mi.Ray3f(o, d, maxt, ray.time, ray.wavelengths), chosen, dr.select(found, beta_w * wsum, 0.0), found
 
     def _toward_light(self, x, wdir):
         """1 where direction ``wdir`` from ``x`` points into the bounding sphere of an
@@ -616,7 +716,7 @@ class ProjectivePathIntegrator(PathIntegrator):
         return dr.select(out, 1.0, 0.0)
 
     def _edge_distribution(self, scene, S):
-        """Boundaries for the first-hit term: in proportion to length, times
+        """Boundaries for the indirect term: in proportion to length, times
         ``LIGHT_BOOST`` for the edges that are silhouettes seen from a vertex or the
         centroid of an emissive shape (those that cast shadow boundaries of small lights)
         and for the analytic curves (silhouettes from almost everywhere). Every boundary
@@ -652,16 +752,16 @@ class ProjectivePathIntegrator(PathIntegrator):
                 weights.append(LIGHT_BOOST * edges.curves.lengths(F))
             return mi.DiscreteDistribution(mi.Float(np.concatenate(weights).astype(np.float32)))
 
-    def _incident(self, scene, rng, ray, wl, active):
-        """Radiance arriving along ``ray`` (the rest of a path: one segment fewer than
-        ``max_depth``; emitters visible)."""
-        saved = self.max_depth, self.hide_emitters
-        self.max_depth = saved[0] - 1 if saved[0] > 0 else saved[0]
+    def _incident(self, scene, rng, ray, wl, depth, active):
+        """Radiance arriving along ``ray`` from camera-path vertex ``depth`` (the rest of the
+        path: ``max_depth`` and Russian roulette count the ``depth`` vertices before it;
+        emitters visible)."""
+        saved = self.hide_emitters
         self.hide_emitters, self.face_first_hit = False, True
         try:
-            return PathIntegrator.sample(self, scene, rng, ray, wl, PRIMAL, None, None, active)[0]
+            return PathIntegrator._sample(self, scene, rng, ray, wl, PRIMAL, None, None, active, depth0=depth)[0]
         finally:
-            self.max_depth, self.hide_emitters = saved
+            self.hide_emitters = saved
             self.face_first_hit = False
 
 
