@@ -336,3 +336,59 @@ def test_image_area_light(tmp_path):
     np.testing.assert_allclose(out[4:7, 6:10].mean(axis=(0, 1)), [k, 0, 0], atol=0.04 * k)
     with pytest.raises(XMLError, match="give either"):
         to_dict(write(tmp_path, AREA.format(z=5, light='"string filename" "e.exr" "rgb L" [1 1 1]'), "x.pbrt"))
+
+
+# -- forms of pbrt-v4's syntax found in pbrt-v4-scenes (benchmarks/pbrt_scenes.py) ---------------
+
+GAP_HEAD = """
+LookAt 0 0 5  0 0 0  0 1 0
+Camera "perspective" "float fov" 40
+Film "rgb" "integer xresolution" 16 "integer yresolution" 16
+Sampler "independent" "integer pixelsamples" 4
+WorldBegin
+"""
+
+
+def test_repeated_parameter_last_one_wins(tmp_path):
+    """pbrt-v4 looks parameters up from the last given, so a repeated parameter overrides
+    the earlier one (watercolor/camera-2.pbrt gives "focaldistance" and "lensradius" twice)."""
+    path = write(tmp_path, GAP_HEAD + 'Shape "sphere" "float radius" 1 "float radius" 2.5\n')
+    d, notes, _ = convert(path)
+    sphere = [v for k, v in d.items() if k.startswith("shape_")]
+    assert len(sphere) == 1 and sphere[0]["radius"] == 2.5
+    assert not any("radius" in n for n in notes)       # the shadowed one is not "unused"
+
+
+def test_named_material_defined_after_its_use(tmp_path):
+    """pbrt-v4 resolves named materials after parsing: contemporary-bathroom uses
+    NamedMaterial "light" before it includes materials.pbrt, which defines it."""
+    write(tmp_path, 'MakeNamedMaterial "late" "string type" "diffuse" "rgb reflectance" [0.1 0.2 0.3]\n',
+          "materials.pbrt")
+    path = write(tmp_path, GAP_HEAD + 'NamedMaterial "late"\nShape "sphere"\nInclude "materials.pbrt"\n')
+    d, _, _ = convert(path)
+    shape = [v for k, v in d.items() if k.startswith("shape_")][0]
+    assert shape["bsdf"] == {"type": "ref", "id": "mat_late"}
+    assert d["mat_late"]["bsdf"]["reflectance"]["value"] == [0.1, 0.2, 0.3]
+    assert list(d).index("mat_late") < list(d).index("shape_0001")    # defined before it is referenced
+    pbr.load_dict(d)
+    # A name never defined is still an error at the NamedMaterial's line.
+    path = write(tmp_path, GAP_HEAD + 'NamedMaterial "never"\nShape "sphere"\n', "bad.pbrt")
+    with pytest.raises(XMLError, match=r"bad.pbrt:7: NamedMaterial: unknown material 'never'"):
+        convert(path)
+
+
+def test_parameters_after_include_continue_its_last_directive(tmp_path):
+    """pbrt-v4 splices an included file's tokens into the including file, so parameters
+    after ``Include`` belong to the included file's last directive (smoke-plume/plume.pbrt
+    gives the smoke's sigma_a and sigma_s after including its density grid)."""
+    write(tmp_path, '# the grid\nMakeNamedMedium "smoke" "string type" "homogeneous" "float scale" 2\n', "grid.pbrt")
+    path = write(tmp_path, GAP_HEAD + 'Include "grid.pbrt"\n  "rgb sigma_a" [0.5 0.25 0.125] "float scale" 3\n'
+                 'MediumInterface "smoke" ""\nMaterial "interface"\nShape "sphere"\n')
+    d, _, _ = convert(path)
+    m = d["medium_smoke"]
+    assert m["sigma_a"]["value"] == [0.5, 0.25, 0.125] and m["scale"] == 3.0   # the later "scale" wins
+    pbr.load_dict(d)
+    # Import parses its file on its own (pbrt-v4): no parameters follow it.
+    path = write(tmp_path, GAP_HEAD + 'Import "grid.pbrt" "float scale" 3\n', "imp.pbrt")
+    with pytest.raises(XMLError, match=r"imp.pbrt:7: Import: takes no parameters"):
+        convert(path)
