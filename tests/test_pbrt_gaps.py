@@ -392,3 +392,24 @@ def test_parameters_after_include_continue_its_last_directive(tmp_path):
     path = write(tmp_path, GAP_HEAD + 'Import "grid.pbrt" "float scale" 3\n', "imp.pbrt")
     with pytest.raises(XMLError, match=r"imp.pbrt:7: Import: takes no parameters"):
         convert(path)
+
+
+def test_light_tracing_integrator_with_a_lens_is_approximated(tmp_path):
+    """pbr's bdpt connects paths to a static pinhole camera only (barcelona-pavilion's
+    night view is bdpt with a thin lens): a clear reader error, or volpath under
+    approximate=True, instead of a dict that the loader rejects."""
+    text = GAP_HEAD.replace('Camera "perspective" "float fov" 40',
+                            'Camera "perspective" "float fov" 40 "float lensradius" 0.1 "float focaldistance" 5\n'
+                            'Integrator "bdpt" "integer maxdepth" 4') + 'Shape "sphere"\n'
+    path = write(tmp_path, text)
+    with pytest.raises(XMLError, match=r"scene.pbrt:4: Integrator: 'bdpt' with a 'thinlens' camera .* not supported"):
+        convert(path)
+    d, notes, _ = convert(path, approximate=True)
+    assert d["integrator"] == {"type": "volpath", "max_depth": 5}
+    assert any("'volpath' is used" in n for n in notes)
+    pbr.load_dict(d)
+    # Without the lens, bdpt stays.
+    d, _, _ = convert(write(tmp_path, GAP_HEAD.replace('Camera "perspective" "float fov" 40',
+                                                       'Camera "perspective" "float fov" 40\nIntegrator "bdpt"')
+                            + 'Shape "sphere"\n', "pin.pbrt"))
+    assert d["integrator"]["type"] == "bdpt"
