@@ -413,3 +413,35 @@ def test_light_tracing_integrator_with_a_lens_is_approximated(tmp_path):
                                                        'Camera "perspective" "float fov" 40\nIntegrator "bdpt"')
                             + 'Shape "sphere"\n', "pin.pbrt"))
     assert d["integrator"]["type"] == "bdpt"
+
+
+def test_hair_color_is_its_reflectance(tmp_path):
+    """pbrt-v4's hair reads "color" when "reflectance" is not given (bunny-fur.pbrt gives
+    "rgb color"): it sets the fibre's colour, not the default eumelanin 1.3."""
+    path = write(tmp_path, GAP_HEAD + 'Material "hair" "rgb color" [0.5 0.4 0.3]\n'
+                 'Shape "curve" "point3 P" [0 0 0  0 0.3 0  0 0.6 0  0 1 0] "float width" 0.1 "string type" "cylinder"\n')
+    d, notes, _ = convert(path)
+    m = [v for k, v in d.items() if k.startswith("material_")][0]
+    assert m["reflectance"]["value"] == [0.5, 0.4, 0.3] and "eumelanin" not in m
+    assert not any("'color'" in n for n in notes)
+    path = write(tmp_path, GAP_HEAD + 'Material "hair" "rgb color" [0.5 0.4 0.3] "rgb reflectance" [0.1 0.1 0.1]\n'
+                 'Shape "sphere"\n', "both.pbrt")
+    m = [v for k, v in convert(path)[0].items() if k.startswith("material_")][0]
+    assert m["reflectance"]["value"] == [0.1, 0.1, 0.1]      # "reflectance" wins
+
+
+def test_skip_missing_leaves_out_a_medium_of_a_missing_file(tmp_path):
+    """With skip_missing=True, a medium named after a file was left out (smoke-plume's
+    density grid file defines "smoke") is left out with a note; without a missing file,
+    an unknown medium is still an error."""
+    body = 'Include "grid.pbrt" "rgb sigma_a" [1 1 1]\nMediumInterface "smoke" ""\nMaterial "interface"\nShape "sphere"\n'
+    path = write(tmp_path, GAP_HEAD + body)
+    d, notes, _ = convert(path, skip_missing=True)
+    assert any("unknown medium 'smoke'" in n and "left out" in n for n in notes)
+    assert all("interior" not in v for v in d.values() if isinstance(v, dict))
+    pbr.load_dict(d)
+    with pytest.raises(XMLError, match=r"scene.pbrt:7: Include: file not found"):
+        convert(path)
+    path = write(tmp_path, GAP_HEAD + 'MediumInterface "smoke" ""\nShape "sphere"\n', "nofile.pbrt")
+    with pytest.raises(XMLError, match=r"nofile.pbrt:7: MediumInterface: unknown medium 'smoke'"):
+        convert(path, skip_missing=True)

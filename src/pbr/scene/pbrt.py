@@ -643,9 +643,13 @@ class PBRTScene:
         inside, outside = (d.args[0], d.args[0]) if len(d.args) == 1 else d.args
         for n in (inside, outside):
             if n and n not in self.media:
-                raise XMLError(f"{d.where}: MediumInterface: unknown medium {n!r} "
-                               f"(known: {', '.join(sorted(self.media)) or 'none'})")
-        self.state.inside, self.state.outside = inside or None, outside or None
+                msg = f"unknown medium {n!r} (known: {', '.join(sorted(self.media)) or 'none'})"
+                if not (self.skip_missing and any("file not found" in x for x in self.notes)):
+                    raise XMLError(f"{d.where}: MediumInterface: {msg}")
+                # Probably defined in a file left out (e.g. a density grid's file).
+                self.note(d.where, f"MediumInterface: {msg}, after a missing file; left out")
+        known = lambda n: n if n in self.media else None
+        self.state.inside, self.state.outside = known(inside), known(outside)
 
     def _d_Texture(self, d):
         if len(d.args) != 3 or not all(isinstance(a, str) for a in d.args):
@@ -1263,8 +1267,9 @@ class PBRTScene:
             b = {"type": "hair"}
             if p.has("sigma_a"):
                 b["sigma_a"] = p.value("sigma_a", kind="unbounded")
-            elif p.has("reflectance"):
-                b["reflectance"] = p.value("reflectance")
+            elif p.has("reflectance") or p.has("color"):
+                # pbrt-v4 reads "color" (pbrt-v3's name) when "reflectance" is not given.
+                b["reflectance"] = p.value("reflectance" if p.has("reflectance") else "color")
             else:
                 # pbrt-v4: eumelanin 1.3 when no colour is given, pheomelanin 0 (Mitsuba: 0.2).
                 b["eumelanin"] = p.value("eumelanin", 1.3, kind="float")
