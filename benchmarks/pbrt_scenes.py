@@ -20,11 +20,12 @@ where only its scene files are present (``/work/data/pbrt-v4-scenes`` holds the 
 of a few, read one by one), missing geometry shows as "missing file".
 
     python benchmarks/pbrt_scenes.py [--root /work/data/pbrt-v4-scenes] [--res 64] [--spp 4]
-                                     [--compare] [--no-render]
+                                     [--compare] [--no-render] [--csv rows.csv]
 """
 from __future__ import annotations
 
 import argparse
+import csv
 import os
 import sys
 import time
@@ -92,6 +93,8 @@ def run(path: str, args) -> dict:
         return row
     row["convert_s"] = time.perf_counter() - t0
     row["missing"] = sum("file not found" in n for n in notes)
+    row["first_missing"] = next((n.split("file not found: ", 1)[1].split(" (looked", 1)[0] for n in notes
+                                 if "file not found" in n), "")
     row["approx"] = sum("not found" not in n and ("not supported" in n or ": " in n) and "is used" in n
                         or "approximat" in n for n in notes)
     row["notes"] = notes
@@ -144,6 +147,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-render", action="store_true")
     ap.add_argument("--notes", action="store_true", help="print every note")
     ap.add_argument("--mesh-dir", default=None)
+    ap.add_argument("--csv", default=None, help="write one row per scene to this CSV file")
     args = ap.parse_args(argv)
     pbr.set_backend("auto")
     files = scene_files(args.root)
@@ -163,6 +167,14 @@ def main(argv=None) -> int:
         if args.notes:
             for n in r.get("notes", []):
                 print("      " + n.replace(args.root + "/", ""))
+    if args.csv:
+        keys = ["scene", "parse", "strict", "missing", "first_missing", "approx_notes", "load", "why", "convert_s", "load_s",
+                "render_s", "render", "mean", "mitsuba"]
+        with open(args.csv, "w", newline="") as f:
+            w = csv.DictWriter(f, keys, extrasaction="ignore")
+            w.writeheader()
+            for r in rows:
+                w.writerow({**r, "approx_notes": len(r.get("notes", []))})
     n = len(rows)
     strict = sum(r["strict"] == "ok" for r in rows)
     loaded = sum(r.get("load") == "ok" for r in rows)
