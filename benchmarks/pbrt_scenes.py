@@ -3,6 +3,7 @@ pbr reads, which it renders, and what stops the rest.
 
 For every scene file (a ``.pbrt`` file with ``WorldBegin``) under ``--root``:
 
+0. parse: the file and the files it includes that are present read as pbrt-v4 syntax;
 1. strict load (``pbr.scene.pbrt.convert``, missing files skipped): the first feature
    pbr lacks is reported as the scene's blocker;
 2. approximate load (``approximate=True, skip_missing=True``): what is substituted or
@@ -13,16 +14,18 @@ For every scene file (a ``.pbrt`` file with ``WorldBegin``) under ``--root``:
    converted for Mitsuba 3 (``mitsuba=True``), rendered by pbr and Mitsuba 3 and compared
    statistically (``pbr.validate``; box filter).
 
-Prints one row per scene and a summary. The collection is 1.5 GB (geometry, textures);
+Prints one row per scene, a summary, and the scenes grouped by what stops their strict
+conversion and their render. The collection is 1.5 GB (geometry, textures);
 where only its scene files are present (``/work/data/pbrt-v4-scenes`` holds the text
 of a few, read one by one), missing geometry shows as "missing file".
 
     python benchmarks/pbrt_scenes.py [--root /work/data/pbrt-v4-scenes] [--res 64] [--spp 4]
-                                     [--compare] [--no-render]
+                                     [--compare] [--no-render] [--csv rows.csv]
 """
 from __future__ import annotations
 
 import argparse
+import csv
 import os
 import sys
 import time
@@ -32,6 +35,7 @@ import numpy as np
 import pbr
 from pbr import validate
 from pbr.scene.pbrt import convert
+from pbr.scene.pbrt_tokens import read_directives, resolve
 from pbr.scene.xml import XMLError
 
 
@@ -50,11 +54,31 @@ def scene_files(root: str) -> list[str]:
 def blocker(msg: str) -> str:
     """The short reason of a strict-load error."""
     m = msg.split(": ", 1)[1] if ": " in msg else msg
-    return m.split(" (not supported", 1)[0][:90]
+    return m.split(" (not supported", 1)[0].split(" is not supported", 1)[0][:90]
+
+
+def parses(path: str, base: str, seen=None) -> str:
+    """'ok', or the first syntax error of ``path`` and of the files it includes (those
+    present; paths relative to the main file's directory ``base``, as pbrt-v4 resolves them)."""
+    seen = set() if seen is None else seen
+    if path in seen:
+        return "ok"
+    seen.add(path)
+    try:
+        for d in read_directives(path):
+            if d.name in ("Include", "Import") and d.args and isinstance(d.args[0], str):
+                full = resolve(d.args[0], base)
+                if os.path.exists(full):
+                    r = parses(full, base, seen)
+                    if r != "ok":
+                        return r
+    except XMLError as e:
+        return str(e).replace(base + "/", "")[:120]
+    return "ok"
 
 
 def run(path: str, args) -> dict:
-    row = {"scene": os.path.relpath(path, args.root)}
+    row = {"scene": os.path.relpath(path, args.root), "parse": parses(path, os.path.dirname(path))}
     try:
         convert(path, res=args.res, spp=args.spp, mesh_dir=args.mesh_dir, skip_missing=True)
         row["strict"] = "ok"
@@ -69,6 +93,8 @@ def run(path: str, args) -> dict:
         return row
     row["convert_s"] = time.perf_counter() - t0
     row["missing"] = sum("file not found" in n for n in notes)
+    row["first_missing"] = next((n.split("file not found: ", 1)[1].split(" (looked", 1)[0] for n in notes
+                                 if "file not found" in n), "")
     row["approx"] = sum("not found" not in n and ("not supported" in n or ": " in n) and "is used" in n
                         or "approximat" in n for n in notes)
     row["notes"] = notes
@@ -121,6 +147,7 @@ def main(argv=None) -> int:
     ap.add_argument("--no-render", action="store_true")
     ap.add_argument("--notes", action="store_true", help="print every note")
     ap.add_argument("--mesh-dir", default=None)
+    ap.add_argument("--csv", default=None, help="write one row per scene to this CSV file")
     args = ap.parse_args(argv)
     pbr.set_backend("auto")
     files = scene_files(args.root)
@@ -140,13 +167,36 @@ def main(argv=None) -> int:
         if args.notes:
             for n in r.get("notes", []):
                 print("      " + n.replace(args.root + "/", ""))
+    if args.csv:
+        keys = ["scene", "parse", "strict", "missing", "first_missing", "approx_notes", "load", "why", "convert_s", "load_s",
+                "render_s", "render", "mean", "mitsuba"]
+        with open(args.csv, "w", newline="") as f:
+            w = csv.DictWriter(f, keys, extrasaction="ignore")
+            w.writeheader()
+            for r in rows:
+                w.writerow({**r, "approx_notes": len(r.get("notes", []))})
     n = len(rows)
     strict = sum(r["strict"] == "ok" for r in rows)
     loaded = sum(r.get("load") == "ok" for r in rows)
     rendered = sum("render_s" in r for r in rows)
     complete = sum(r.get("load") == "ok" and r.get("missing") == 0 for r in rows)
-    print(f"\n{n} scenes: {strict} convert without approximations, {loaded} load approximately "
+    parsed = sum(r["parse"] == "ok" for r in rows)
+    print(f"\n{n} scenes: {parsed} parse, {strict} convert without approximations, {loaded} load approximately "
           f"({complete} with all their files), {rendered} render at {args.res} px, {args.spp} spp")
+    for title, key in (("what stops a strict conversion (missing files skipped)", lambda r: r["strict"]),
+                       ("what stops a render (approximate=True, skip_missing=True)",
+                        lambda r: "ok" if "render_s" in r else (r.get("why") or r.get("render") or "not rendered"))):
+        groups: dict[str, list] = {}
+        for r in rows:
+            k = key(r)
+            if k != "ok":
+                groups.setdefault(k, []).append(r["scene"])
+        print(f"\n{title}:")
+        for k, v in sorted(groups.items(), key=lambda kv: (-len(kv[1]), kv[0])):
+            print(f"  {len(v):3d}  {k}\n         {', '.join(v)}")
+    for r in rows:
+        if r["parse"] != "ok":
+            print(f"parse error: {r['parse']}")
     return 0
 
 

@@ -452,3 +452,112 @@ def test_medium_preset_errors_and_grids(tmp_path):
     m, notes = _medium(tmp_path, "uniformgrid", '"string preset" "Cream" "float density" [1]')
     assert m["sigma_a"]["value"] == [0.0002, 0.0028, 0.0163] and m["sigma_s"]["value"] == [7.38, 5.47, 3.15]
     assert any("reads 'preset' for homogeneous media only" in n for n in notes)
+
+
+# -- forms of pbrt-v4's syntax found in pbrt-v4-scenes (benchmarks/pbrt_scenes.py) ---------------
+
+GAP_HEAD = """
+LookAt 0 0 5  0 0 0  0 1 0
+Camera "perspective" "float fov" 40
+Film "rgb" "integer xresolution" 16 "integer yresolution" 16
+Sampler "independent" "integer pixelsamples" 4
+WorldBegin
+"""
+
+
+def test_repeated_parameter_last_one_wins(tmp_path):
+    """pbrt-v4 looks parameters up from the last given, so a repeated parameter overrides
+    the earlier one (watercolor/camera-2.pbrt gives "focaldistance" and "lensradius" twice)."""
+    path = write(tmp_path, GAP_HEAD + 'Shape "sphere" "float radius" 1 "float radius" 2.5\n')
+    d, notes, _ = convert(path)
+    sphere = [v for k, v in d.items() if k.startswith("shape_")]
+    assert len(sphere) == 1 and sphere[0]["radius"] == 2.5
+    assert not any("radius" in n for n in notes)       # the shadowed one is not "unused"
+
+
+def test_named_material_defined_after_its_use(tmp_path):
+    """pbrt-v4 resolves named materials after parsing: contemporary-bathroom uses
+    NamedMaterial "light" before it includes materials.pbrt, which defines it."""
+    write(tmp_path, 'MakeNamedMaterial "late" "string type" "diffuse" "rgb reflectance" [0.1 0.2 0.3]\n',
+          "materials.pbrt")
+    path = write(tmp_path, GAP_HEAD + 'NamedMaterial "late"\nShape "sphere"\nInclude "materials.pbrt"\n')
+    d, _, _ = convert(path)
+    shape = [v for k, v in d.items() if k.startswith("shape_")][0]
+    assert shape["bsdf"] == {"type": "ref", "id": "mat_late"}
+    assert d["mat_late"]["bsdf"]["reflectance"]["value"] == [0.1, 0.2, 0.3]
+    assert list(d).index("mat_late") < list(d).index("shape_0001")    # defined before it is referenced
+    pbr.load_dict(d)
+    # A name never defined is still an error at the NamedMaterial's line.
+    path = write(tmp_path, GAP_HEAD + 'NamedMaterial "never"\nShape "sphere"\n', "bad.pbrt")
+    with pytest.raises(XMLError, match=r"bad.pbrt:7: NamedMaterial: unknown material 'never'"):
+        convert(path)
+
+
+def test_parameters_after_include_continue_its_last_directive(tmp_path):
+    """pbrt-v4 splices an included file's tokens into the including file, so parameters
+    after ``Include`` belong to the included file's last directive (smoke-plume/plume.pbrt
+    gives the smoke's sigma_a and sigma_s after including its density grid)."""
+    write(tmp_path, '# the grid\nMakeNamedMedium "smoke" "string type" "homogeneous" "float scale" 2\n', "grid.pbrt")
+    path = write(tmp_path, GAP_HEAD + 'Include "grid.pbrt"\n  "rgb sigma_a" [0.5 0.25 0.125] "float scale" 3\n'
+                 'MediumInterface "smoke" ""\nMaterial "interface"\nShape "sphere"\n')
+    d, _, _ = convert(path)
+    m = d["medium_smoke"]
+    assert m["sigma_a"]["value"] == [0.5, 0.25, 0.125] and m["scale"] == 3.0   # the later "scale" wins
+    pbr.load_dict(d)
+    # Import parses its file on its own (pbrt-v4): no parameters follow it.
+    path = write(tmp_path, GAP_HEAD + 'Import "grid.pbrt" "float scale" 3\n', "imp.pbrt")
+    with pytest.raises(XMLError, match=r"imp.pbrt:7: Import: takes no parameters"):
+        convert(path)
+
+
+def test_light_tracing_integrator_with_a_lens_is_approximated(tmp_path):
+    """pbr's bdpt connects paths to a static pinhole camera only (barcelona-pavilion's
+    night view is bdpt with a thin lens): a clear reader error, or volpath under
+    approximate=True, instead of a dict that the loader rejects."""
+    text = GAP_HEAD.replace('Camera "perspective" "float fov" 40',
+                            'Camera "perspective" "float fov" 40 "float lensradius" 0.1 "float focaldistance" 5\n'
+                            'Integrator "bdpt" "integer maxdepth" 4') + 'Shape "sphere"\n'
+    path = write(tmp_path, text)
+    with pytest.raises(XMLError, match=r"scene.pbrt:4: Integrator: 'bdpt' with a 'thinlens' camera .* not supported"):
+        convert(path)
+    d, notes, _ = convert(path, approximate=True)
+    assert d["integrator"] == {"type": "volpath", "max_depth": 5}
+    assert any("'volpath' is used" in n for n in notes)
+    pbr.load_dict(d)
+    # Without the lens, bdpt stays.
+    d, _, _ = convert(write(tmp_path, GAP_HEAD.replace('Camera "perspective" "float fov" 40',
+                                                       'Camera "perspective" "float fov" 40\nIntegrator "bdpt"')
+                            + 'Shape "sphere"\n', "pin.pbrt"))
+    assert d["integrator"]["type"] == "bdpt"
+
+
+def test_hair_color_is_its_reflectance(tmp_path):
+    """pbrt-v4's hair reads "color" when "reflectance" is not given (bunny-fur.pbrt gives
+    "rgb color"): it sets the fibre's colour, not the default eumelanin 1.3."""
+    path = write(tmp_path, GAP_HEAD + 'Material "hair" "rgb color" [0.5 0.4 0.3]\n'
+                 'Shape "curve" "point3 P" [0 0 0  0 0.3 0  0 0.6 0  0 1 0] "float width" 0.1 "string type" "cylinder"\n')
+    d, notes, _ = convert(path)
+    m = [v for k, v in d.items() if k.startswith("material_")][0]
+    assert m["reflectance"]["value"] == [0.5, 0.4, 0.3] and "eumelanin" not in m
+    assert not any("'color'" in n for n in notes)
+    path = write(tmp_path, GAP_HEAD + 'Material "hair" "rgb color" [0.5 0.4 0.3] "rgb reflectance" [0.1 0.1 0.1]\n'
+                 'Shape "sphere"\n', "both.pbrt")
+    m = [v for k, v in convert(path)[0].items() if k.startswith("material_")][0]
+    assert m["reflectance"]["value"] == [0.1, 0.1, 0.1]      # "reflectance" wins
+
+
+def test_skip_missing_leaves_out_a_medium_of_a_missing_file(tmp_path):
+    """With skip_missing=True, a medium named after a file was left out (smoke-plume's
+    density grid file defines "smoke") is left out with a note; without a missing file,
+    an unknown medium is still an error."""
+    body = 'Include "grid.pbrt" "rgb sigma_a" [1 1 1]\nMediumInterface "smoke" ""\nMaterial "interface"\nShape "sphere"\n'
+    path = write(tmp_path, GAP_HEAD + body)
+    d, notes, _ = convert(path, skip_missing=True)
+    assert any("unknown medium 'smoke'" in n and "left out" in n for n in notes)
+    assert all("interior" not in v for v in d.values() if isinstance(v, dict))
+    pbr.load_dict(d)
+    with pytest.raises(XMLError, match=r"scene.pbrt:7: Include: file not found"):
+        convert(path)
+    path = write(tmp_path, GAP_HEAD + 'MediumInterface "smoke" ""\nShape "sphere"\n', "nofile.pbrt")
+    with pytest.raises(XMLError, match=r"nofile.pbrt:7: MediumInterface: unknown medium 'smoke'"):
+        convert(path, skip_missing=True)

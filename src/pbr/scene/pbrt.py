@@ -53,7 +53,7 @@ from ..media.presets import MEASURED_SCATTERING, measured_scattering
 from ..plugins.props import did_you_mean
 from ..spectrum import CIE_Y_INTEGRAL, LAMBDA_MAX, LAMBDA_MIN, SELLMEIER, blackbody, cie_tables_np, xyz_to_srgb
 from ..textures import TEXTURE_TYPES
-from .pbrt_tokens import Directive, Param, read_directives, resolve
+from .pbrt_tokens import Directive, Param, last_of_each, read_directives, resolve
 from .xml import XMLError
 
 __all__ = ["to_dict", "convert", "PBRTScene"]
@@ -357,6 +357,7 @@ class PBRTScene:
         self.stack: list[tuple[str, _State, str]] = []
         self.named_cs: dict[str, list] = {}
         self.named_materials: dict[str, str] = {}        # name -> key in out
+        self.material_uses: dict[str, str] = {}          # NamedMaterial name -> where first used
         self.textures = {"float": {}, "spectrum": {}}
         self.media: dict[str, str] = {}
         self.objects: dict[str, str] = {}                 # instance definitions -> shapegroup key
@@ -422,15 +423,26 @@ class PBRTScene:
         self.finish()
         return self.out
 
-    def run_file(self, path: str, where: str | None = None) -> None:
+    def run_file(self, path: str, where: str | None = None, extra: list = ()) -> None:
+        """Run the directives of ``path``. ``extra``: parameters that follow the
+        ``Include`` of this file; pbrt-v4 splices an included file's tokens into the
+        including one, so they continue the file's last directive."""
         if path in self.including:
             raise XMLError(f"{where}: Include: {path!r} includes itself")
         if not os.path.exists(path):
             raise XMLError(f"{where or path + ':0'}: file not found: {path!r}")
         self.including.append(path)
         try:
+            last = None
             for d in read_directives(path):
-                self.directive(d)
+                if last is not None:
+                    self.directive(last)
+                last = d
+            if extra and last is None:
+                raise XMLError(f"{where}: Include: parameters after an empty file {path!r}")
+            if last is not None:
+                last.params = last_of_each(list(last.params) + list(extra))
+                self.directive(last)
         finally:
             self.including.pop()
 
@@ -574,14 +586,15 @@ class PBRTScene:
         self.note(d.where, "Accelerator ignored (Mitsuba's ray tracer builds its own BVH)")
 
     def _d_Include(self, d):
-        name, = self.args(d, 1)
+        name, = self.args(d, 1, allow_params=d.name == "Include")
         full = resolve(name, self.base)
         if not os.path.exists(full):
             return self.missing(d.where, d.name, name, full)
-        self.run_file(full, d.where)
+        self.run_file(full, d.where, d.params)
 
     def _d_Import(self, d):
-        # pbrt-v4 parses imported files in parallel; their named objects join the scene.
+        # pbrt-v4 parses imported files in parallel (no parameters follow them); their
+        # named objects join the scene.
         self._d_Include(d)
 
     def _d_WorldBegin(self, d):
@@ -634,9 +647,13 @@ class PBRTScene:
         inside, outside = (d.args[0], d.args[0]) if len(d.args) == 1 else d.args
         for n in (inside, outside):
             if n and n not in self.media:
-                raise XMLError(f"{d.where}: MediumInterface: unknown medium {n!r} "
-                               f"(known: {', '.join(sorted(self.media)) or 'none'})")
-        self.state.inside, self.state.outside = inside or None, outside or None
+                msg = f"unknown medium {n!r} (known: {', '.join(sorted(self.media)) or 'none'})"
+                if not (self.skip_missing and any("file not found" in x for x in self.notes)):
+                    raise XMLError(f"{d.where}: MediumInterface: {msg}")
+                # Probably defined in a file left out (e.g. a density grid's file).
+                self.note(d.where, f"MediumInterface: {msg}, after a missing file; left out")
+        known = lambda n: n if n in self.media else None
+        self.state.inside, self.state.outside = known(inside), known(outside)
 
     def _d_Texture(self, d):
         if len(d.args) != 3 or not all(isinstance(a, str) for a in d.args):
@@ -667,10 +684,11 @@ class PBRTScene:
         self.named_materials[name] = key
 
     def _d_NamedMaterial(self, d):
+        # pbrt-v4 resolves named materials after parsing: one may be defined after its
+        # use (e.g. in a materials file included at the end); checked in finish().
         name, = self.args(d, 1)
-        if name not in self.named_materials:
-            raise XMLError(f"{d.where}: NamedMaterial: unknown material {name!r}")
-        self.state.material = self.named_materials[name]
+        self.material_uses.setdefault(name, d.where)
+        self.state.material = self.named_materials.get(name, f"mat_{_safe(name)}")
 
     # -- lights --------------------------------------------------------------------------------
     def _d_LightSource(self, d):
@@ -1310,8 +1328,9 @@ class PBRTScene:
             b = {"type": "hair"}
             if p.has("sigma_a"):
                 b["sigma_a"] = p.value("sigma_a", kind="unbounded")
-            elif p.has("reflectance"):
-                b["reflectance"] = p.value("reflectance")
+            elif p.has("reflectance") or p.has("color"):
+                # pbrt-v4 reads "color" (pbrt-v3's name) when "reflectance" is not given.
+                b["reflectance"] = p.value("reflectance" if p.has("reflectance") else "color")
             else:
                 # pbrt-v4: eumelanin 1.3 when no colour is given, pheomelanin 0 (Mitsuba: 0.2).
                 b["eumelanin"] = p.value("eumelanin", 1.3, kind="float")
@@ -1650,9 +1669,22 @@ class PBRTScene:
 
     # -- camera, film, sampler, integrator ------------------------------------------------------------------------
     def finish(self) -> None:
+        for name, where in self.material_uses.items():
+            if name not in self.named_materials:
+                raise XMLError(f"{where}: NamedMaterial: unknown material {name!r}")
+        # Materials first, so that a shape's reference to a named material defined after
+        # it points backwards (as loaders that instantiate in order need).
+        mats = {k: v for k, v in self.out.items() if k.startswith(("mat_", "material_"))}
+        self.out = {**mats, **{k: v for k, v in self.out.items() if k not in mats}}
         for v in list(self.out.values()):
             _strip_private(v)
         sensor, integrator = self.sensor(), self.make_integrator()
+        if integrator["type"] in ("bdpt", "mlt", "lightpath") and (
+                sensor["type"] != "perspective" or "lensradius" in sensor or "to_world_end" in sensor):
+            # pbr's light-tracing integrators connect paths to a static pinhole camera only.
+            self.unsupported(self.integrator, f"{integrator['type']!r} with a {sensor['type']!r} camera with a lens "
+                                              "or motion: 'volpath' is used")
+            integrator = {"type": "volpath", "max_depth": integrator.get("maxdepth", 5) + 1}
         if not any(isinstance(v, dict) and v.get("type") in ("ply", "sphere", "disk", "cylinder", "bsplinecurve",
                                                             "instance") for v in self.out.values()):
             raise XMLError(f"{self.path}:0: the scene has no shapes")

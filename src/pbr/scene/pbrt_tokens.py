@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 from .xml import XMLError
 
-__all__ = ["Token", "Param", "Directive", "tokenize", "read_directives", "PARAM_TYPES"]
+__all__ = ["Token", "Param", "Directive", "tokenize", "read_directives", "last_of_each", "PARAM_TYPES"]
 
 # pbrt-v4's parameter types, and the synonyms its parser accepts.
 PARAM_TYPES = {
@@ -237,12 +237,16 @@ def read_directives(path: str, text: str | None = None):
                 i += 1
             d.params.append(Param(PARAM_TYPES[ptype], pname, _convert(PARAM_TYPES[ptype], pname, raw, decl.where, d.name),
                                   decl.where))
-        names = [p.name for p in d.params]
-        for k in set(names):
-            if names.count(k) > 1:
-                p = d.params[names.index(k)]
-                raise XMLError(f"{p.where}: {d.name}: parameter {k!r} given more than once")
+        d.params = last_of_each(d.params)
         yield d
+
+
+def last_of_each(params: list) -> list:
+    """``params`` without the parameters shadowed by a later one of the same name:
+    pbrt-v4 looks parameters up from the last given (its ParameterDictionary reverses
+    them), so a repeated parameter overrides the earlier one without an error."""
+    last = {q.name: i for i, q in enumerate(params)}
+    return [q for i, q in enumerate(params) if last[q.name] == i]
 
 
 def resolve(path: str, base: str) -> str:
