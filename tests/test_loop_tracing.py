@@ -107,6 +107,12 @@ def test_volpath_loops_traced_once(monkeypatch, integrator):
     assert _body_traces(monkeypatch, integrator, lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
 
 
+def test_simplevolpath_without_media_traced_once(monkeypatch):
+    """Without media the medium index is a constant, not loop state."""
+    scene = pbr.load_dict(_cornell(integrator={"type": "simplevolpath", "max_depth": 5}))
+    assert _body_traces(monkeypatch, "simplevolpath", lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
+
+
 def test_volpath_without_media_traced_once(monkeypatch):
     """Without media volpath's spectral MIS ratio, null-collision count and medium index
     are constants, not loop state; its shadow rays, with nothing to cross, are one

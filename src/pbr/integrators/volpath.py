@@ -445,15 +445,18 @@ class SimpleVolPathIntegrator(_MediumAware):
         L = mi.Float(0.0)
         beta = mi.Float(1.0)
         depth = mi.UInt32(0)
-        medium = mi.UInt32(self._medium)
+        # The medium index is loop state only with media (see volpath's loop).
+        cond = ConditionalState(medium=(mi.UInt32(self._medium), len(media) > 0))
+        cond_state = cond.state
         active = mi.Bool(active)
         valid = mi.Bool(False)
         ray = mi.Ray3f(ray)
         has_media = len(media) > 0
         # Not loop state (see volpath's loop): the wavelengths, the stream's constants.
         rng_state = rng.loop_state()
-        while dr.hint(active, label="simplevolpath", exclude=[rng, wl]):
+        while dr.hint(active, label="simplevolpath", exclude=[rng, wl, cond]):
             rng.set_loop_state(rng_state)
+            medium, = cond.values(cond_state)
             si, shape = geo.intersect(ray, active)
             hit = si.is_valid()
             scattered = mi.Bool(False)
@@ -482,6 +485,7 @@ class SimpleVolPathIntegrator(_MediumAware):
             ray, medium = volume.next_ray(scene, shape, si, ray, medium, wi, p_sc, sc, cont, rs, skip)
             depth[at_vertex] = depth + 1
             active = skip | (cont & (beta > 0))
+            cond_state = cond.update(medium=medium)
             rng_state = rng.loop_state()
         rng.set_loop_state(rng_state)
         # Only the first wavelength was traced: it stands for all four.
