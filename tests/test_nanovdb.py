@@ -137,6 +137,33 @@ def test_majorant_cells_bound_the_density(tmp_path):
     assert np.all(best[~used] == 0) and np.median(best[used] / full[used]) > 0.75
 
 
+def test_nanovdb_written_file_from_warp_test_assets():
+    """Warp's test asset ``test_grid.nvdb`` (written by NanoVDB's own tools, zip-compressed,
+    an unnamed float grid of 0.25 voxels, values of both signs, so not a density pbr
+    accepts): its stored box is the active voxels' index box -10 .. 10 plus one, times
+    0.25 (-2.5 .. 2.75); the dense voxels and affine map pbr builds from it, interpolated
+    trilinearly in NumPy, give Warp's sampler's values inside that box."""
+    from pbr.media.nanovdb import dense_samples, read_nvdb
+    asset = os.path.join(os.path.dirname(wp.__file__), "tests", "assets", "test_grid.nvdb")
+    if not os.path.exists(asset):
+        pytest.skip("this Warp build has no tests/assets/test_grid.nvdb")
+    g = read_nvdb(asset, ("",), "k")[0][""]
+    np.testing.assert_allclose(g.world_bbox, [[-2.5] * 3, [2.75] * 3])
+    vals, sc, off = dense_samples(g, g.world_bbox, "k", nonnegative=False)
+    u = np.random.default_rng(7).uniform(0, 1, (20000, 3))
+    x = u * sc + off                                   # array index (x, y, z); vals is [z, y, x]
+    i0 = np.floor(x).astype(int)
+    f = x - i0
+    got = np.zeros(len(u))
+    for corner in np.ndindex(2, 2, 2):
+        c = np.minimum(i0 + corner, np.array(vals.shape[::-1]) - 1)
+        w = np.prod(np.where(np.array(corner) == 1, f, 1 - f), axis=1)
+        got += w * vals[c[:, 2], c[:, 1], c[:, 0]]
+    ref = warp_sample(g.volume, g.world_bbox[0] + u * (g.world_bbox[1] - g.world_bbox[0]))
+    assert ref.std() > 0.01
+    np.testing.assert_allclose(got, ref, atol=1e-5 * np.abs(ref).max())
+
+
 def test_reader_returns_warp_bounds_and_map(tmp_path):
     """read_nvdb: the stored world box of each grid, its voxel size and origin; two grids
     in one file are found by name; a missing name is None and the file's names are listed."""
@@ -327,6 +354,16 @@ def test_errors_name_file_and_line(tmp_path, monkeypatch):
     bad = write_tmp(tmp_path, "c.pbrt", ERR.format(params='"float scale" 2'))
     with pytest.raises(XMLError, match=r"c\.pbrt:6: MakeNamedMedium: nanovdb needs \"string filename\""):
         pbr.load_file(bad)
+    # Mitsuba 3 has no such medium: refused, or a homogeneous stand-in under approximate.
+    from pbr.scene.pbrt import convert
+    ok = write_tmp(tmp_path, "f.pbrt", ERR.format(params=f'"string filename" "{path}" "rgb Le" [1 1 1]'))
+    with pytest.raises(XMLError, match=r"f\.pbrt:6: MakeNamedMedium: medium 'nanovdb' \(NanoVDB files\) is not"):
+        convert(ok, mitsuba=True)
+    d, notes, _ = convert(ok, mitsuba=True, approximate=True)
+    assert [v["type"] for v in d.values() if isinstance(v, dict) and "sigma_a" in v] == ["homogeneous"]
+    d, notes, _ = convert(ok)
+    assert any("f.pbrt:6" in n and "ignores 'Le'" in n for n in notes), notes
+    assert [v for v in d.values() if isinstance(v, dict) and v.get("type") == "nanovdb"][0].get("Le") is None
     junk = tmp_path / "junk.nvdb"
     junk.write_bytes(b"not a nanovdb file at all" * 4)
     bad = write_tmp(tmp_path, "d.pbrt", ERR.format(params=f'"string filename" "{junk}"'))

@@ -1496,10 +1496,10 @@ class PBRTScene:
             return {"type": "cloud", "p0": list(p0), "p1": list(p1), "to_world": _mi_transform(m),
                     "density": p.one("density", "float", 1.0), "wispiness": p.one("wispiness", "float", 1.0),
                     "frequency": p.one("frequency", "float", 5.0), **common}
-        if t == "nanovdb":
+        if t == "nanovdb" and self.pbr_plugin(MEDIUM_TYPES, "nanovdb"):
             return self.nanovdb_medium(p, m, common)
-        if t == "cloud":
-            self.unsupported(p.d, f"medium {t!r} (procedural clouds): "
+        if t in ("cloud", "nanovdb"):
+            self.unsupported(p.d, f"medium {t!r} ({'procedural clouds' if t == 'cloud' else 'NanoVDB files'}): "
                                   "a homogeneous medium of its sigma_a/sigma_s is used")
             return {"type": "homogeneous", **common}
         raise p.error("type", f"unknown medium {t!r} (pbrt-v4's: homogeneous, uniformgrid, rgbgrid, cloud, nanovdb)")
