@@ -3,11 +3,26 @@ looking up a NanoVDB float grid's values over a box of index coordinates on the 
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import warp as wp
 
-wp.config.log_level = wp.LOG_ERROR       # no start-up banner or module-load lines
-wp.init()
+
+@contextlib.contextmanager
+def _quiet():
+    """Warp without its start-up banner and module-load lines (the user's log level is
+    restored afterwards)."""
+    level = wp.config.log_level
+    wp.config.log_level = wp.LOG_ERROR
+    try:
+        yield
+    finally:
+        wp.config.log_level = level
+
+
+with _quiet():
+    wp.init()
 
 
 @wp.kernel
@@ -20,10 +35,11 @@ def _lookup_box(volume: wp.uint64, lo: wp.vec3i, out: wp.array3d(dtype=wp.float3
 
 def load_grids(data: bytes) -> list:
     """Every grid of a serialised NanoVDB file (its bytes), as Warp volumes on the CPU."""
-    first = wp.Volume.load_from_nvdb(data, device="cpu")
-    grids = [first]
-    while (nxt := grids[-1].load_next_grid()) is not None:
-        grids.append(nxt)
+    with _quiet():
+        first = wp.Volume.load_from_nvdb(data, device="cpu")
+        grids = [first]
+        while (nxt := grids[-1].load_next_grid()) is not None:
+            grids.append(nxt)
     return grids
 
 
@@ -36,7 +52,8 @@ def lookup_box(volume, lo, shape) -> np.ndarray:
     """The grid's values at the index coordinates ``lo + (x, y, z)``, 0 <= x, y, z <
     shape (nx, ny, nz), as a float32 (nz, ny, nx) array."""
     nx, ny, nz = (int(s) for s in shape)
-    out = wp.zeros((nz, ny, nx), dtype=wp.float32, device="cpu")
-    wp.launch(_lookup_box, dim=(nz, ny, nx), inputs=[volume.id, wp.vec3i(*(int(v) for v in lo)), out],
-              device="cpu")
+    with _quiet():
+        out = wp.zeros((nz, ny, nx), dtype=wp.float32, device="cpu")
+        wp.launch(_lookup_box, dim=(nz, ny, nx), inputs=[volume.id, wp.vec3i(*(int(v) for v in lo)), out],
+                  device="cpu")
     return out.numpy()
