@@ -445,6 +445,12 @@ def blackbody(lam, temperature: float):
     return 1e-9 * c0 / (l ** 5 * (dr.exp(c1 / (l * temperature)) - 1.0))
 
 
+def blackbody_normalised(lam, temperature):
+    """Planck's law divided by its peak value (Wien's displacement law: the peak is at
+    2.8977721e-3 / T metres), pbrt-v4's ``BlackbodySpectrum``; numpy or Dr.Jit."""
+    return blackbody(lam, temperature) / blackbody(2.8977721e-3 / temperature * 1e9, temperature)
+
+
 # Sellmeier coefficients (B1, B2, B3, C1, C2, C3; C in um^2) of optical glasses (Schott data).
 SELLMEIER = {
     "glass-bk7": (1.03961212, 0.231792344, 1.01046945, 0.00600069867, 0.0200179144, 103.560653),

@@ -5,7 +5,9 @@ Grid convention (Mitsuba's ``gridvolume`` and pbrt-v4's ``SampledGrid``): an arr
 shape (nz, ny, nx[, channels]) covers the unit cube of the medium's local space, voxel
 ``(x, y, z)`` sits at ``((x + 0.5) / nx, (y + 0.5) / ny, (z + 0.5) / nz)``, and lookups
 interpolate trilinearly with clamped addressing. Outside the unit cube a grid is zero
-(pbrt-v4: the medium is bounded by its grid).
+(pbrt-v4: the medium is bounded by its grid). A grid may instead carry its own affine map
+from the unit cube to array indices (``u * scale + offset`` per axis, voxel k at index k):
+NanoVDB grids, whose voxels sit at integer index coordinates (:mod:`.nanovdb`).
 
 RGB grids are stored as Mitsuba's spectral ``gridvolume`` stores them: per voxel, three
 sigmoid coefficients of rgb / (2 max(rgb)) and the scale 2 max(rgb) (for albedos too).
@@ -85,12 +87,16 @@ class GridTable:
     def __init__(self):
         self.grids: list[tuple[np.ndarray, str]] = []
         self.owners: list = []
+        self.affine: list = []
 
-    def add(self, grid: np.ndarray, form: str, path: str | None = None) -> int:
+    def add(self, grid: np.ndarray, form: str, path: str | None = None, affine=None) -> int:
         """Add a (nz, ny, nx, c) grid; RGB grids are upsampled in ``form`` ('albedo' or
         'unbounded'). A single-channel grid given a ``path`` is the differentiable scene
-        parameter ``<path>.data`` (Mitsuba's gridvolume key). Returns the grid index."""
+        parameter ``<path>.data`` (Mitsuba's gridvolume key). ``affine``: (scale, offset),
+        each (x, y, z), mapping the unit cube to array indices (default: the grid spans
+        the cube, voxel centres at (k + 0.5) / n). Returns the grid index."""
         self.grids.append((grid, form))
+        self.affine.append(affine)
         if path is not None and grid.shape[3] == 1:
             valid = {"data": ALBEDO if form == "albedo" else NONNEGATIVE}
             owner = ParamOwner(path, valid=valid, data=mi.TensorXf(grid))
@@ -136,6 +142,12 @@ class GridTable:
             chans.append(c)
             off += g.size
         self.has_rgb = 4 in chans
+        self.has_affine = any(a is not None for a in self.affine)
+        if self.has_affine:
+            aff = [a if a is not None else (np.array(r, np.float64), np.full(3, -0.5))
+                   for a, r in zip(self.affine, res)]
+            self.aff_scale, self.aff_offset = (
+                mi.Vector3f(*(np.array([a[j][k] for a in aff], np.float32) for k in range(3))) for j in (0, 1))
         self.data = dr.concat(flat) if len(flat) > 1 else (flat[0] if flat else mi.Float(0.0))
         self.offset = mi.UInt32(offs or [0])
         r = np.array(res or [(1, 1, 1)], np.int64)
@@ -148,7 +160,11 @@ class GridTable:
         inside = active & dr.all((p >= 0.0) & (p <= 1.0))
         res = dr.gather(mi.Vector3i, self.res, gid, inside)
         off = dr.gather(mi.UInt32, self.offset, gid, inside)
-        x = p * mi.Vector3f(res) - 0.5
+        if self.has_affine:
+            x = p * dr.gather(mi.Vector3f, self.aff_scale, gid, inside) + dr.gather(mi.Vector3f, self.aff_offset,
+                                                                                   gid, inside)
+        else:
+            x = p * mi.Vector3f(res) - 0.5
         x0 = dr.floor(x)
         f = x - x0
         i0 = mi.Vector3i(x0)
@@ -200,16 +216,19 @@ def _rgb_voxels(rgb: np.ndarray, form: str) -> np.ndarray:
     return np.concatenate([coeffs, scale[:, None]], axis=1).astype(np.float32)
 
 
-def cell_maxima(bound: np.ndarray, m: int = MAJORANT_RES) -> np.ndarray:
+def cell_maxima(bound: np.ndarray, m: int = MAJORANT_RES, affine=None) -> np.ndarray:
     """Maximum of a trilinearly interpolated voxel grid over each cell of an m^3 grid
     covering the unit cube: the max over every voxel whose interpolation support
-    overlaps the cell (separable: one axis at a time). Returns (m, m, m) [z, y, x]."""
+    overlaps the cell (separable: one axis at a time). ``affine``: the grid's map from
+    the cube to array indices (see :meth:`GridTable.add`). Returns (m, m, m) [z, y, x]."""
     out = bound
     for axis in range(3):
         n = out.shape[axis]
         c = np.arange(m)
-        lo = np.clip(np.floor(c / m * n - 0.5).astype(np.int64), 0, n - 1)
-        hi = np.clip(np.floor((c + 1) / m * n - 0.5).astype(np.int64) + 1, 0, n - 1)
+        sc, off = (n, -0.5) if affine is None else (affine[0][2 - axis], affine[1][2 - axis])
+        a, b = c / m * sc + off, (c + 1) / m * sc + off
+        lo = np.clip(np.floor(np.minimum(a, b)).astype(np.int64), 0, n - 1)
+        hi = np.clip(np.floor(np.maximum(a, b)).astype(np.int64) + 1, 0, n - 1)
         moved = np.moveaxis(out, axis, 0)
         red = np.stack([moved[a:b + 1].max(axis=0) for a, b in zip(lo, hi)])
         out = np.moveaxis(red, 0, axis)

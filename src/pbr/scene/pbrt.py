@@ -690,6 +690,30 @@ class PBRTScene:
         self.material_uses.setdefault(name, d.where)
         self.state.material = self.named_materials.get(name, f"mat_{_safe(name)}")
 
+    def nanovdb_medium(self, p: _Params, m, common: dict) -> dict:
+        """pbrt-v4's ``nanovdb`` medium: pbr's ``nanovdb`` medium (read with NVIDIA Warp),
+        in the CTM's frame; it emits from its temperature grid, never ``Le``."""
+        fname = p.string("filename")
+        if not fname:
+            raise p.error(None, "nanovdb needs \"string filename\" (a .nvdb file)")
+        full = resolve(fname, self.base)
+        if not os.path.exists(full):
+            self.missing(p.d.where, p.d.name, fname, full)
+            return {"type": "homogeneous", **common}
+        if "Le" in common:
+            self.note(p.p["Le"].where, "MakeNamedMedium: pbrt-v4's nanovdb medium ignores 'Le' (it emits from "
+                                       "its temperature grid)")
+            common.pop("Le")
+        out = {"type": "nanovdb", "filename": full, "to_world": _mi_transform(m), **common}
+        out["Lescale"] = p.one("Lescale", "float", 1.0)
+        for k in ("gridname", "temperaturename"):
+            if p.has(k):
+                out[k] = p.string(k)
+        for k in ("temperatureoffset", "temperaturecutoff", "temperaturescale"):
+            if p.has(k):
+                out[k] = p.one(k, "float")
+        return out
+
     # -- lights --------------------------------------------------------------------------------
     def _d_LightSource(self, d):
         t, = self.args(d, 1, allow_params=True)
@@ -1472,6 +1496,8 @@ class PBRTScene:
             return {"type": "cloud", "p0": list(p0), "p1": list(p1), "to_world": _mi_transform(m),
                     "density": p.one("density", "float", 1.0), "wispiness": p.one("wispiness", "float", 1.0),
                     "frequency": p.one("frequency", "float", 5.0), **common}
+        if t == "nanovdb" and self.pbr_plugin(MEDIUM_TYPES, "nanovdb"):
+            return self.nanovdb_medium(p, m, common)
         if t in ("cloud", "nanovdb"):
             self.unsupported(p.d, f"medium {t!r} ({'procedural clouds' if t == 'cloud' else 'NanoVDB files'}): "
                                   "a homogeneous medium of its sigma_a/sigma_s is used")
