@@ -12,7 +12,7 @@
   Veach's factor for shading normals.
 * :func:`start_light_path`, :func:`connect_to_camera`: the first and the last step of a
   light path, with the sampling routines of the lights (``LightSet.sample_Le``) and of the
-  camera (``PerspectiveCamera.sample_Wi``).
+  camera (``PerspectiveCamera.sample_Wi``: a pinhole or a point of a thin lens).
 
 Conventions: directions are world-space unit vectors unless named ``*_local``; along a
 light path ``si.wi`` points back toward the light (where the particle came from) and
@@ -107,7 +107,7 @@ class LightTracingIntegrator(SamplingIntegrator):
 
     pass_separable = False    # the splat film (float64 sums) spans passes
 
-    needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
+    needs_camera_importance = True  # connects paths to the camera (sample_Wi / its own camera rays)
     traces_light_paths = True
     supports_films = False        # splats RGB (RGB films only)
 
@@ -189,13 +189,23 @@ def start_light_path(scene, sampler, rng, wl, active):
     return ls, ray, mi.Spectrum(ls.weight)
 
 
-def connect_to_camera(scene, camera, si, bsdf_id, wl, beta, active):
+def lens_sample(camera, rng):
+    """The 2D sample of a camera connection's lens point (``sample_Wi``) from ``rng``, or
+    None for a pinhole (which draws nothing, so that its random streams stay as they were)."""
+    if not camera.needs_aperture_sample:
+        return None
+    return mi.Point2f(rng.next_float32(), rng.next_float32())
+
+
+def connect_to_camera(scene, camera, si, bsdf_id, wl, beta, active, cs=None):
     """Connect a light-path surface vertex ``si`` (reached with throughput ``beta``) to the
-    pinhole: (contribution to splat, film position, valid mask). The contribution is
+    camera through ``cs``, its ``camera.sample_Wi(si.p, u)`` (default: the pinhole's):
+    (contribution to splat, film position, valid mask). The contribution is
     ``beta f*(wi, wo) |cos| corr We / pdf`` with the adjoint BSDF toward the camera,
     Veach's shading-normal factor and the camera's importance, zero where the shadow ray
-    is blocked."""
-    cs = camera.sample_Wi(si.p)
+    to the lens point is blocked."""
+    if cs is None:
+        cs = camera.sample_Wi(si.p)
     ok = active & cs.valid
     ok &= scene.geometry.unoccluded(si, cs.p, ok)
     wo_local = si.to_local(cs.wi)
