@@ -140,6 +140,7 @@ class SamplingIntegrator:
     needs_camera_importance = False  # whether paths connect to the camera (sample_Wi: static perspective/thinlens)
     bytes_per_lane = 0            # per-path state kept in memory between kernels (pbr.memory)
     supports_films = True         # whether non-RGB films (sensor matrix, extra channels) develop right
+    supports_sensor_films = False  # without supports_films: whether a camera sensor (RGB only) is fine
     supports_moving_shapes = True  # whether shapes may move (motion blur; light paths never do)
     moving_shapes = False         # whether the scene being rendered has moving shapes (see prepare)
     # Records a function's kernels once and replays them (dr.freeze for pbr scenes): set
@@ -175,10 +176,12 @@ class SamplingIntegrator:
             raise SceneError(f"{self.path}: the {self.name!r} integrator connects paths to the camera, which needs "
                              f"a static 'perspective' or 'thinlens' camera (sensor {sensor} is {what})")
         film = getattr(cam, "film", None)
-        if film is not None and not film.plain and not self.supports_films:
-            raise SceneError(f"{self.path}: the {self.name!r} integrator develops plain RGB images only; sensor "
-                             f"{sensor}'s film ({film.name!r}) has a sensor response or extra channels "
-                             f"(use 'hdrfilm' or a default 'rgb' film)")
+        if film is not None and not self.supports_films and not (
+                film.splattable if self.supports_sensor_films else film.plain):
+            what = "RGB images" if self.supports_sensor_films else "plain RGB images"
+            has = "extra channels" if self.supports_sensor_films else "a sensor response or extra channels"
+            raise SceneError(f"{self.path}: the {self.name!r} integrator develops {what} only; sensor "
+                             f"{sensor}'s film ({film.name!r}) has {has} (use 'hdrfilm' or an 'rgb' film)")
         if getattr(cam, "weights_rays", False) and not self.supports_films:
             raise SceneError(f"{self.path}: the {self.name!r} integrator does not support the "
                              f"{type(cam).name!r} camera (its rays carry lens weights)")

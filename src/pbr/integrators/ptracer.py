@@ -39,6 +39,8 @@ class ParticleTracerIntegrator(SamplingIntegrator):
 
     needs_camera_importance = True  # connects paths to the camera (sample_Wi / its own camera rays)
     name = "ptracer"
+    supports_films = False        # splats RGB (RGB films only)
+    supports_sensor_films = True  # with a camera sensor (pbrt-v4's rgb film: iso, maxcomponentvalue)
     bytes_per_lane = 48           # the light path and its camera connection (pbr.memory)
     traces_light_paths = True
 
