@@ -239,3 +239,12 @@ def test_sensor_film_clamps_each_splat():
     free = pbr_fn(_sensor_scene("ptracer"))(seed=1, spp=64)
     clamped = pbr_fn(_sensor_scene("ptracer", clamp=0.5))(seed=1, spp=64)
     assert clamped.mean() < 0.9 * free.mean() and np.all(clamped <= free + 1e-6)
+
+
+def test_films_with_extra_channels_are_refused():
+    for name in ("ptracer", "bdpt"):
+        d = dof_scene(name, max_depth=3)
+        d["sensor"]["film"] = {"type": "gbuffer", "xresolution": 8, "yresolution": 6}
+        with pytest.raises(SceneError, match=rf"the '{name}' integrator develops RGB images only; sensor 0's film "
+                                             r"\('gbuffer'\) has extra channels"):
+            pbr.load_dict(d)

@@ -180,8 +180,9 @@ class SamplingIntegrator:
                 film.splattable if self.supports_sensor_films else film.plain):
             what = "RGB images" if self.supports_sensor_films else "plain RGB images"
             has = "extra channels" if self.supports_sensor_films else "a sensor response or extra channels"
+            rgb = "an" if self.supports_sensor_films else "a default"
             raise SceneError(f"{self.path}: the {self.name!r} integrator develops {what} only; sensor "
-                             f"{sensor}'s film ({film.name!r}) has {has} (use 'hdrfilm' or an 'rgb' film)")
+                             f"{sensor}'s film ({film.name!r}) has {has} (use 'hdrfilm' or {rgb} 'rgb' film)")
         if getattr(cam, "weights_rays", False) and not self.supports_films:
             raise SceneError(f"{self.path}: the {self.name!r} integrator does not support the "
                              f"{type(cam).name!r} camera (its rays carry lens weights)")

@@ -1,5 +1,5 @@
 """``ptracer`` (Mitsuba's particle tracer; pbrt-v4's ``lightpath``): light tracing, every
-surface vertex of a light path connected to the camera (pinhole or thin lens) and splatted on the film
+surface vertex of a light path connected to the camera (a pinhole or a thin lens) and splatted
 (:class:`pbr.integrators.lightpath.SplatFilm`). Conventions: docs/integrators.md.
 """
 
