@@ -179,7 +179,6 @@ def _blocks(img, b=2):
     return img.reshape(h // b, b, w // b, b, c).mean(axis=(1, 3))
 
 
-@pytest.mark.slow
 def test_mlt_matches_path():
     """MLT's variance across 16 independent runs (its pixels are correlated: see
     tests/test_mlt.py), 2 x 2 blocks, Welch's t-test."""
