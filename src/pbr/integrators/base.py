@@ -195,7 +195,8 @@ class SamplingIntegrator:
     def check(self, scene) -> None:
         """Raise a SceneError naming this integrator's key path where ``scene`` holds
         something it cannot render (called when a scene is loaded with it)."""
-        if scene.geometry.moving and (self.traces_light_paths or self.needs_camera_importance or not self.supports_moving_shapes):
+        if scene.geometry.moving and (self.traces_light_paths or self.needs_camera_importance
+                                      or not self.supports_moving_shapes):
             raise SceneError(f"{self.path}: the {self.name!r} integrator does not support moving shapes or "
                              f"instances ('to_world_end': motion blur); use 'path' or 'volpath'")
         if self.surfaces_only and len(scene.media):
