@@ -127,9 +127,13 @@ def test_perspective_lensradius_is_mitsubas_thin_lens():
     ours = cam.sample_ray(mi.Point2f(*pos), mi.Point2f(*ap))
     assert np.allclose(np.array(ours.o), np.array(ref.o), atol=2e-5)
     assert np.allclose(np.array(ours.d), np.array(ref.d), atol=2e-6)
-    with pytest.raises(SceneError, match=r"the 'ptracer' integrator .* with a lens or motion"):
+    # Light tracing connects to the lens (tests/test_lens_light_tracing.py), not to a moving camera.
+    pbr.load_dict({"type": "scene", "integrator": {"type": "ptracer"}, "l": {"type": "constant"},
+                   "s": {"type": "sphere"}, "cam": {"type": "perspective", "lensradius": 0.1, "film": film}})
+    with pytest.raises(SceneError, match=r"the 'ptracer' integrator .* a moving 'perspective' camera"):
         pbr.load_dict({"type": "scene", "integrator": {"type": "ptracer"}, "l": {"type": "constant"},
-                       "s": {"type": "sphere"}, "cam": {"type": "perspective", "lensradius": 0.1, "film": film}})
+                       "s": {"type": "sphere"}, "cam": {"type": "perspective", "lensradius": 0.1, "film": film,
+                                                        "to_world_end": mi.ScalarTransform4f().translate([0.1, 0, 0])}})
 
 
 def test_camera_motion_blur_smears_along_the_path():

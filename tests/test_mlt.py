@@ -102,10 +102,13 @@ def test_uniform_samples_are_a_pcg32_stream():
     assert len(np.unique(x)) == x.size
 
 
-@pytest.mark.parametrize("maxdepth", [1, 3])
-def test_streams_hold_every_draw(maxdepth):
-    """BDPT's subpaths draw at most what ``stream_dims`` allots (every (depth, s, t))."""
+@pytest.mark.parametrize("maxdepth,lens", [(1, False), (3, False), (3, True)])
+def test_streams_hold_every_draw(maxdepth, lens):
+    """BDPT's subpaths draw at most what ``stream_dims`` allots (every (depth, s, t));
+    with a thin lens, also the camera ray's lens point and each light vertex's."""
     d = cornell({"type": "mlt", "maxdepth": maxdepth}, res=8)
+    if lens:
+        d["sensor"].update(lensradius=0.1, focaldistance=4.0)
     scene = pbr.load_dict(d)
     integ = scene.integrator
     integ.prepare(scene)
@@ -121,7 +124,8 @@ def test_streams_hold_every_draw(maxdepth):
     light_rng = mlt_mod.PrimarySampleStream.at(samples, n, cam_dims)
     rng = IndependentSampler.make_rng(dr.arange(mi.UInt32, n), mi.UInt32(2))
     wl = pbr.spectrum.SampledWavelengths.sample_visible(rng.next_float32())
-    ray = cam.sample_ray(mi.Point2f(rng.next_float32(), rng.next_float32()))
+    aperture = cam_rng.next_2d() if lens else None
+    ray = cam.sample_ray(mi.Point2f(rng.next_float32(), rng.next_float32()), aperture)
     strat = bdpt_mod.Strategies(maxdepth, s, t)
     store, n_light = integ.bdpt.light_subpaths(scene, cam, light_rng, wl, strat, lambda *a: None)
     integ.bdpt.camera_subpaths(scene, cam, cam_rng, ray, wl, mi.Bool(True), store, n_light, strat)

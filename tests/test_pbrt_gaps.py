@@ -510,25 +510,32 @@ def test_parameters_after_include_continue_its_last_directive(tmp_path):
         convert(path)
 
 
-def test_light_tracing_integrator_with_a_lens_is_approximated(tmp_path):
-    """pbr's bdpt connects paths to a static pinhole camera only (barcelona-pavilion's
-    night view is bdpt with a thin lens): a clear reader error, or volpath under
-    approximate=True, instead of a dict that the loader rejects."""
+def test_light_tracing_integrator_with_a_lens_stays(tmp_path):
+    """pbr's bdpt connects paths to a static camera, pinhole or thin lens
+    (barcelona-pavilion's night view is bdpt with a thin lens): the lens keeps bdpt. A
+    moving camera does not: a clear reader error, or volpath under approximate=True,
+    instead of a dict that the loader rejects."""
     text = GAP_HEAD.replace('Camera "perspective" "float fov" 40',
                             'Camera "perspective" "float fov" 40 "float lensradius" 0.1 "float focaldistance" 5\n'
                             'Integrator "bdpt" "integer maxdepth" 4') + 'Shape "sphere"\n'
     path = write(tmp_path, text)
-    with pytest.raises(XMLError, match=r"scene.pbrt:4: Integrator: 'bdpt' with a 'thinlens' camera .* not supported"):
-        convert(path)
-    d, notes, _ = convert(path, approximate=True)
+    d, notes, _ = convert(path)
+    assert d["integrator"] == {"type": "bdpt", "maxdepth": 4}
+    assert d["sensor"]["type"] == "thinlens" and d["sensor"]["aperture_radius"] == 0.1
+    assert not any("'volpath' is used" in n for n in notes)
+    pbr.load_dict(d)
+    moving = write(tmp_path, GAP_HEAD.replace(
+        'Camera "perspective" "float fov" 40',
+        'TransformTimes 0 1\nActiveTransform EndTime\nTranslate 0.1 0 0\nActiveTransform All\n'
+        'Camera "perspective" "float fov" 40 "float lensradius" 0.1 "float focaldistance" 5\n'
+        'Integrator "bdpt" "integer maxdepth" 4') + 'Shape "sphere"\n', "moving.pbrt")
+    with pytest.raises(XMLError, match=r"moving.pbrt:\d+: Integrator: 'bdpt' with a moving 'thinlens' camera.* "
+                                       r"not supported"):
+        convert(moving)
+    d, notes, _ = convert(moving, approximate=True)
     assert d["integrator"] == {"type": "volpath", "max_depth": 5}
     assert any("'volpath' is used" in n for n in notes)
     pbr.load_dict(d)
-    # Without the lens, bdpt stays.
-    d, _, _ = convert(write(tmp_path, GAP_HEAD.replace('Camera "perspective" "float fov" 40',
-                                                       'Camera "perspective" "float fov" 40\nIntegrator "bdpt"')
-                            + 'Shape "sphere"\n', "pin.pbrt"))
-    assert d["integrator"]["type"] == "bdpt"
 
 
 def test_hair_color_is_its_reflectance(tmp_path):

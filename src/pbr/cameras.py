@@ -138,7 +138,7 @@ class ProjectiveCamera:
 
     @property
     def pinhole(self) -> bool:
-        """Whether light paths can connect to this camera (a static pinhole)."""
+        """Whether this camera is a static pinhole."""
         return False
 
     def sample_time(self, u):
@@ -243,7 +243,13 @@ class ProjectiveCamera:
             return pos
         return mi.Point2f((pos.x - ox) / sx, (pos.y - oy) / sy)
 
-    # Light tracing needs a pinhole's importance; the pinhole camera defines these.
+    @property
+    def connectable(self) -> bool:
+        """Whether light paths can connect to this camera (``sample_Wi``, ``pdf_We``):
+        a static perspective camera, pinhole or thin lens."""
+        return False
+
+    # Light tracing needs the camera's importance; the perspective camera defines these.
     def We(self, ray):
         raise self._unsupported("importance evaluation (We)")
 
@@ -255,8 +261,8 @@ class ProjectiveCamera:
 
     def _unsupported(self, what: str):
         return NotImplementedError(f"the {self.name!r} camera does not support {what} (light-tracing "
-                                   "integrators such as ptracer, lightpath and bdpt need a static 'perspective' "
-                                   "camera without a lens)")
+                                   "integrators such as ptracer, lightpath, bdpt and mlt need a static "
+                                   "'perspective' or 'thinlens' camera)")
 
 
 def _rotate_z_to(w, v, inverse: bool = False):
@@ -388,53 +394,116 @@ class PerspectiveCamera(ProjectiveCamera):
         inside = (local_d.z > 0) & (pos.x >= 0) & (pos.x <= 1) & (pos.y >= 0) & (pos.y <= 1)
         return pos, inside
 
-    def _check_pinhole(self):
-        if not self.pinhole:
-            raise self._unsupported("importance (a lens or a moving camera)")
+    @property
+    def connectable(self) -> bool:
+        return self.motion is None
+
+    def lens_area(self) -> float:
+        """Area of the aperture disk (pbrt-v4's ``lensArea``; 1 for a pinhole, whose
+        position is a delta)."""
+        return math.pi * self.aperture_radius ** 2 if self.needs_aperture_sample else 1.0
+
+    def _check_connectable(self):
+        if not self.connectable:
+            raise self._unsupported("importance (a moving camera)")
+
+    def _lens_film(self, o_local, d_local):
+        """(film position, on the film) of the camera-space ray from ``o_local`` along
+        ``d_local`` through a thin lens: the film point that sees the ray's point on the
+        plane in focus (z = ``focus_distance``), which every ray of that film point
+        crosses."""
+        t = (self.focus_distance - o_local.z) * dr.rcp(d_local.z)
+        focus = mi.Vector3f(o_local.x + d_local.x * t, o_local.y + d_local.y * t, self.focus_distance)
+        pos, inside = self.film_position(focus)
+        return pos, inside & (d_local.z > 0)
+
+    def _ray_film(self, ray):
+        """(camera-space unit direction, film position, on the film) of the world ray
+        ``ray`` leaving the camera (a pinhole: its direction alone decides)."""
+        local = self._local(ray.d)
+        if not self.needs_aperture_sample:
+            pos, inside = self.film_position(local)
+            return local, pos, inside
+        m = self.to_world.tolist()
+        o_local = self._local(ray.o - mi.Point3f(m[0][3], m[1][3], m[2][3]))
+        pos, inside = self._lens_film(o_local, local)
+        return local, pos, inside
+
+    def lens_point(self, ray):
+        """World point where camera ray ``ray`` (from :meth:`sample_ray`, which starts it at
+        the near clip plane) leaves the lens: the pinhole, or its point on the aperture
+        disk (camera z = 0)."""
+        m = self.to_world.tolist()
+        o = mi.Point3f(m[0][3], m[1][3], m[2][3])
+        if not self.needs_aperture_sample:
+            return o
+        back = self._local(ray.o - o).z * dr.rcp(self._local(ray.d).z)
+        return mi.Point3f(ray.o - ray.d * back)
 
     def We(self, ray):
-        """(importance We, film position) of a ray leaving the camera along ``ray.d``.
-        Units: the pinhole's importance is a delta in position (density 1) times
-        ``1 / (A cos^4 theta)``, so that int We cos theta d omega over the film is 1 and a
-        light-traced image matches the camera-traced one (pbrt-v4's normalisation; Mitsuba
-        returns We cos theta)."""
-        self._check_pinhole()
-        local = self._local(ray.d)
+        """(importance We, film position) of a ray leaving the camera along ``ray.d`` (from
+        its lens point, or any point of it, with a thin lens).
+        Units: the importance is ``1 / (A lens_area cos^4 theta)``, so that int We cos theta
+        d omega dA_lens over the film and the lens is 1 and a light-traced image matches the
+        camera-traced one (pbrt-v4's normalisation; a pinhole's lens is a delta in position,
+        of area 1; Mitsuba returns We cos theta)."""
+        self._check_connectable()
+        local, pos, inside = self._ray_film(ray)
         cos = local.z * dr.rsqrt(dr.squared_norm(local))
-        pos, inside = self.film_position(local)
         c2 = cos * cos
-        return dr.select(inside, dr.rcp(self.film_area() * c2 * c2), 0.0), pos
+        den = self.film_area() * c2 * c2
+        if self.needs_aperture_sample:
+            den = den * self.lens_area()
+        return dr.select(inside, dr.rcp(den), 0.0), pos
 
     def pdf_We(self, ray):
-        """(pdf_pos, pdf_dir) of ``sample_ray`` producing ``ray``: 1 (the pinhole, a delta in
-        position) and the solid-angle density ``1 / (A cos^3 theta)`` of a uniform film position."""
-        self._check_pinhole()
-        local = self._local(ray.d)
+        """(pdf_pos, pdf_dir) of ``sample_ray`` producing ``ray``: ``1 / lens_area`` (1: the
+        pinhole, a delta in position) and the solid-angle density ``1 / (A cos^3 theta)`` of
+        a uniform film position (with a lens too: the focus-plane point is uniform over an
+        area A focus_distance^2)."""
+        self._check_connectable()
+        local, _, inside = self._ray_film(ray)
         cos = local.z * dr.rsqrt(dr.squared_norm(local))
-        _, inside = self.film_position(local)
-        return mi.Float(1.0), dr.select(inside, dr.rcp(self.film_area() * cos * cos * cos), 0.0)
+        pdf_pos = mi.Float(1.0 / self.lens_area()) if self.needs_aperture_sample else mi.Float(1.0)
+        return pdf_pos, dr.select(inside, dr.rcp(self.film_area() * cos * cos * cos), 0.0)
 
     def sample_Wi(self, ref_p, u=None) -> "CameraWiSample":
-        """Connect point ``ref_p`` to the camera (pbrt-v4's ``SampleWi``): importance ``We``
-        of the ray from the pinhole toward ``ref_p``, unit direction ``wi`` from ``ref_p`` to
-        the pinhole, ``pdf`` = dist^2 / cos theta (solid angle at ``ref_p``), film position
-        ``pos``, the pinhole ``p``, and ``valid``: in front of the camera, between the
-        clip planes (in depth, as Mitsuba) and on the film. ``u`` is unused (a pinhole).
-        A surface vertex's contribution is ``beta * f(wi) |cos| * We / pdf``."""
-        self._check_pinhole()
+        """Connect point ``ref_p`` to the camera (pbrt-v4's ``SampleWi``): a point ``p`` of
+        the lens (the pinhole; with a thin lens uniform on the aperture disk from the 2D
+        sample ``u``), the importance ``We`` of the ray from ``p`` toward ``ref_p``, unit
+        direction ``wi`` from ``ref_p`` to ``p``, ``pdf`` = dist^2 / (cos theta lens_area)
+        (solid angle at ``ref_p``), film position ``pos``, and ``valid``: in front of the
+        camera, between the clip planes (in depth, as Mitsuba) and on the film. A surface
+        vertex's contribution is ``beta * f(wi) |cos| * We / pdf``."""
+        self._check_connectable()
         m = self.to_world.tolist()
         p = mi.Point3f(m[0][3], m[1][3], m[2][3])
+        lens = self.needs_aperture_sample
+        if lens:
+            if u is None:
+                raise self._unsupported("connections without a lens sample")
+            disk = square_to_uniform_disk_concentric(u) * self.aperture_radius
+            lens_local = mi.Vector3f(disk.x, disk.y, 0.0)
+            p = p + mi.Vector3f(*[m[r][0] * disk.x + m[r][1] * disk.y for r in range(3)])
         d = p - ref_p
         dist2 = dr.squared_norm(d)
         inv_dist = dr.rsqrt(dist2)
         wi = d * inv_dist
         local = self._local(-d)
-        pos, inside = self.film_position(local)
+        if lens:
+            pos, inside = self._lens_film(lens_local, local)
+        else:
+            pos, inside = self.film_position(local)
         valid = inside & (local.z >= self.near_clip) & (local.z <= self.far_clip) & (dist2 > 0)
         cos = local.z * inv_dist
         c2 = cos * cos
-        We = dr.select(valid, dr.rcp(self.film_area() * c2 * c2), 0.0)
-        pdf = dr.select(valid, dist2 / cos, 0.0)
+        if lens:
+            area = self.lens_area()
+            We = dr.select(valid, dr.rcp(self.film_area() * area * c2 * c2), 0.0)
+            pdf = dr.select(valid, dist2 / (cos * area), 0.0)
+        else:
+            We = dr.select(valid, dr.rcp(self.film_area() * c2 * c2), 0.0)
+            pdf = dr.select(valid, dist2 / cos, 0.0)
         return CameraWiSample(We, wi, pdf, pos, p, valid)
 
 
@@ -442,8 +511,8 @@ class PerspectiveCamera(ProjectiveCamera):
 class ThinLensCamera(PerspectiveCamera):
     """``thinlens``: Mitsuba 3's thin-lens camera: a perspective camera whose rays leave
     a disk-shaped aperture and meet in the plane at ``focus_distance`` (depth of field).
-    Nested as in ``perspective``. Camera-ray integrators only (light tracing needs a
-    pinhole).
+    Nested as in ``perspective``. Light-tracing integrators (``ptracer``, ``bdpt``,
+    ``mlt``) connect to it through its lens (``sample_Wi``) when it does not move.
 
     ========================  =========  ==========  ==============================================
     name                      type       default     meaning

@@ -107,6 +107,12 @@ class HDRFilm:
         return spec.to_xyz(L, wl)
 
     @property
+    def splattable(self) -> bool:
+        """Whether light tracers can splat into the film: RGB with no extra channels (a
+        camera sensor, ``iso`` and ``maxcomponentvalue`` included)."""
+        return self.keeps_rgb and not self.surface_channels and not self.n_extra
+
+    @property
     def plain(self) -> bool:
         """Whether the film is an RGB image with no extra channels and no sensor (what
         light tracers splat into)."""

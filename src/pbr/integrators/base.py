@@ -137,9 +137,10 @@ class SamplingIntegrator:
     differentiable = False        # whether render_forward/render_backward are implemented
     surfaces_only = False         # whether participating media are an error
     traces_light_paths = False    # whether every emitter must emit rays (sample_Le), without media
-    needs_pinhole = False         # whether paths connect to the camera (a 'perspective' camera only)
+    needs_camera_importance = False  # whether paths connect to the camera (sample_Wi: static perspective/thinlens)
     bytes_per_lane = 0            # per-path state kept in memory between kernels (pbr.memory)
     supports_films = True         # whether non-RGB films (sensor matrix, extra channels) develop right
+    supports_sensor_films = False  # without supports_films: whether a camera sensor (RGB only) is fine
     supports_moving_shapes = True  # whether shapes may move (motion blur; light paths never do)
     moving_shapes = False         # whether the scene being rendered has moving shapes (see prepare)
     # Records a function's kernels once and replays them (dr.freeze for pbr scenes): set
@@ -169,16 +170,19 @@ class SamplingIntegrator:
         scene's current lights (cached per scene build by ``LightSet.sampler``)."""
         self.check(scene)
         cam = scene.sensors[sensor] if 0 <= sensor < len(scene.sensors) else None
-        if self.needs_pinhole and cam is not None and not getattr(cam, "pinhole", False):
+        if self.needs_camera_importance and cam is not None and not getattr(cam, "connectable", False):
             name = type(cam).name
-            what = repr(name) if name != "perspective" else "a 'perspective' camera with a lens or motion"
+            what = repr(name) if name not in ("perspective", "thinlens") else f"a moving {name!r} camera"
             raise SceneError(f"{self.path}: the {self.name!r} integrator connects paths to the camera, which needs "
-                             f"a 'perspective' camera (sensor {sensor} is {what}), static and without a lens")
+                             f"a static 'perspective' or 'thinlens' camera (sensor {sensor} is {what})")
         film = getattr(cam, "film", None)
-        if film is not None and not film.plain and not self.supports_films:
-            raise SceneError(f"{self.path}: the {self.name!r} integrator develops plain RGB images only; sensor "
-                             f"{sensor}'s film ({film.name!r}) has a sensor response or extra channels "
-                             f"(use 'hdrfilm' or a default 'rgb' film)")
+        if film is not None and not self.supports_films and not (
+                film.splattable if self.supports_sensor_films else film.plain):
+            what = "RGB images" if self.supports_sensor_films else "plain RGB images"
+            has = "extra channels" if self.supports_sensor_films else "a sensor response or extra channels"
+            rgb = "an" if self.supports_sensor_films else "a default"
+            raise SceneError(f"{self.path}: the {self.name!r} integrator develops {what} only; sensor "
+                             f"{sensor}'s film ({film.name!r}) has {has} (use 'hdrfilm' or {rgb} 'rgb' film)")
         if getattr(cam, "weights_rays", False) and not self.supports_films:
             raise SceneError(f"{self.path}: the {self.name!r} integrator does not support the "
                              f"{type(cam).name!r} camera (its rays carry lens weights)")
@@ -191,7 +195,8 @@ class SamplingIntegrator:
     def check(self, scene) -> None:
         """Raise a SceneError naming this integrator's key path where ``scene`` holds
         something it cannot render (called when a scene is loaded with it)."""
-        if scene.geometry.moving and (self.traces_light_paths or self.needs_pinhole or not self.supports_moving_shapes):
+        if scene.geometry.moving and (self.traces_light_paths or self.needs_camera_importance
+                                      or not self.supports_moving_shapes):
             raise SceneError(f"{self.path}: the {self.name!r} integrator does not support moving shapes or "
                              f"instances ('to_world_end': motion blur); use 'path' or 'volpath'")
         if self.surfaces_only and len(scene.media):

@@ -15,7 +15,7 @@ from ..lights.directional import DirectionalLight
 from ..lights.directionalarea import DirectionalAreaLight
 from ..spectrum import first_only
 from .base import INTEGRATORS
-from .lightpath import (LightTracingIntegrator, connect_to_camera, eval_importance,
+from .lightpath import (LightTracingIntegrator, connect_to_camera, eval_importance, lens_sample,
                         sample_importance, shading_correction, start_light_path)
 
 # Per-vertex flags of stored light vertices.
@@ -31,8 +31,9 @@ MAX_SAMPLES_PER_PASS = 1 << 18   # camera samples per pass (each stores its ligh
 # Random numbers the subpaths draw (``rng.next_float32()``), which MLT's primary samples
 # must hold: a light subpath 5 to start (light, position, direction) and 3 at each vertex
 # it extends (the BSDF sample); a camera subpath 6 at each vertex (light choice and
-# position for next-event estimation, then the BSDF sample).
-LIGHT_START_DIMS, LIGHT_VERTEX_DIMS, CAMERA_VERTEX_DIMS = 5, 3, 6
+# position for next-event estimation, then the BSDF sample). With a thin lens, each light
+# vertex also draws the lens point of its camera connection (LENS_DIMS more).
+LIGHT_START_DIMS, LIGHT_VERTEX_DIMS, CAMERA_VERTEX_DIMS, LENS_DIMS = 5, 3, 6, 2
 
 
 class LightVertex(Struct):
@@ -291,9 +292,10 @@ class BDPTIntegrator(LightTracingIntegrator):
             ctx = ShadingContext(si, wl)
             conn = hit & bsdfs.smooth(bsdf_id, hit) & strategies.wants(k + 1, 1)
 
-            # t = 1: connect y_k to the pinhole (strategy s = k + 1, depth k).
-            Lc, pos, vis = connect_to_camera(scene, camera, si, bsdf_id, wl, beta, conn)
-            cs = camera.sample_Wi(si.p)
+            # t = 1: connect y_k to the camera (strategy s = k + 1, depth k): the pinhole, or
+            # a point of the lens (its 2D sample drawn here: LENS_DIMS).
+            cs = camera.sample_Wi(si.p, lens_sample(camera, rng))
+            Lc, pos, vis = connect_to_camera(scene, camera, si, bsdf_id, wl, beta, conn, cs)
             wi_cam = si.to_local(cs.wi)
             pdf_cam = camera.pdf_We(mi.Ray3f(cs.p, -cs.wi))[1]
             rev_k = to_area(pdf_cam, cs.p, si.p, si.n)
@@ -347,8 +349,7 @@ class BDPTIntegrator(LightTracingIntegrator):
         has_lights = len(lights) > 0
         area_lights = "area" in lights.families
 
-        m = cam.to_world.tolist()
-        prev_p = mi.Point3f(m[0][3], m[1][3], m[2][3])      # z_0: the pinhole
+        prev_p = cam.lens_point(ray)      # z_0: the pinhole or the ray's point on the lens
         prev_n = mi.Normal3f(0.0)
         prev_fwd = mi.Float(1.0)
         prev_E = mi.Float(0.0)

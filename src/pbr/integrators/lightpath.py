@@ -12,7 +12,7 @@
   Veach's factor for shading normals.
 * :func:`start_light_path`, :func:`connect_to_camera`: the first and the last step of a
   light path, with the sampling routines of the lights (``LightSet.sample_Le``) and of the
-  camera (``PerspectiveCamera.sample_Wi``).
+  camera (``PerspectiveCamera.sample_Wi``: a pinhole or a point of a thin lens).
 
 Conventions: directions are world-space unit vectors unless named ``*_local``; along a
 light path ``si.wi`` points back toward the light (where the particle came from) and
@@ -29,7 +29,7 @@ import numpy as np
 
 from .. import spectrum as spec
 from ..bsdfs.base import TRANSMISSION, ShadingContext
-from .base import NonFinite, SamplingIntegrator
+from .base import NonFinite, SamplingIntegrator, clamp_sample
 
 # Mitsuba's ray offset (math::RayEpsilon): rays leaving a surface start this far (relative
 # to the magnitude of the point) along its normal.
@@ -42,19 +42,21 @@ class SplatFilm:
     """An image of contributions splatted at film positions (XYZ sums, float64).
 
     ``splat(pos, L, wl, active)`` adds the spectrum ``L`` (converted to XYZ with the
-    wavelengths' densities, as the camera film does) at film position ``pos`` in
+    wavelengths' densities, or to a camera sensor's values and clamped to the film's
+    ``maxcomponentvalue``, as the camera film does) at film position ``pos`` in
     [0,1]^2 (x right, y down), spread over the pixels the film's reconstruction filter
     covers with weights normalised to sum to 1 over the full (unclipped) footprint, as
     Mitsuba's ``ImageBlock(normalize=True)``: what falls outside the image is lost. It is a
     scatter-add, so it may be called inside a render kernel (also inside its symbolic
     loops); the sums are computed with that kernel. ``develop(scale)`` returns the linear
-    sRGB image ``scale * sum`` (H, W, 3), numpy float64; ``scale = 1 / spp`` when every
+    sRGB image ``scale * sum`` (H, W, 3) through the film's sensor matrix, numpy float64; ``scale = 1 / spp`` when every
     pixel's ``spp`` samples traced one light path each (``W H spp`` paths in all).
     Contributions that are not finite are splatted as 0 and counted in ``nonfinite`` (the
     integrator's :class:`~pbr.integrators.base.NonFinite`).
     """
 
     def __init__(self, camera, nonfinite: NonFinite | None = None):
+        self.film = camera.film
         self.width, self.height = camera.film.size
         self.rfilter = camera.film.rfilter
         # Float64 sums: float atomics add in whatever order threads arrive, and float32
@@ -64,7 +66,7 @@ class SplatFilm:
         self.nonfinite = nonfinite or NonFinite()
 
     def splat(self, pos, L, wl, active):
-        xyz, = self.nonfinite.replace([spec.to_xyz(L, wl)], active)
+        xyz, = self.nonfinite.replace([clamp_sample(self.film, self.film.to_xyz(L, wl))], active)
         self.splat_xyz(pos, xyz, active)
 
     def splat_xyz(self, pos, xyz, active):
@@ -97,6 +99,8 @@ class SplatFilm:
 
     def develop(self, scale: float) -> np.ndarray:
         xyz = np.array(self.buf, dtype=np.float64).reshape(self.height, self.width, 3) * scale
+        if self.film.xyz_matrix is not None:
+            xyz = xyz @ np.asarray(self.film.xyz_matrix, np.float64).T
         return spec.xyz_to_srgb(xyz)
 
 
@@ -107,9 +111,10 @@ class LightTracingIntegrator(SamplingIntegrator):
 
     pass_separable = False    # the splat film (float64 sums) spans passes
 
-    needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
+    needs_camera_importance = True  # connects paths to the camera (sample_Wi / its own camera rays)
     traces_light_paths = True
     supports_films = False        # splats RGB (RGB films only)
+    supports_sensor_films = True  # with a camera sensor (pbrt-v4's rgb film: iso, maxcomponentvalue)
 
     def render(self, scene, sensor=0, seed=0, spp=0, progress=None):
         cam, w, h, spp, _, _ = self._plan(scene, sensor, spp)
@@ -189,13 +194,23 @@ def start_light_path(scene, sampler, rng, wl, active):
     return ls, ray, mi.Spectrum(ls.weight)
 
 
-def connect_to_camera(scene, camera, si, bsdf_id, wl, beta, active):
+def lens_sample(camera, rng):
+    """The 2D sample of a camera connection's lens point (``sample_Wi``) from ``rng``, or
+    None for a pinhole (which draws nothing, so that its random streams stay as they were)."""
+    if not camera.needs_aperture_sample:
+        return None
+    return mi.Point2f(rng.next_float32(), rng.next_float32())
+
+
+def connect_to_camera(scene, camera, si, bsdf_id, wl, beta, active, cs=None):
     """Connect a light-path surface vertex ``si`` (reached with throughput ``beta``) to the
-    pinhole: (contribution to splat, film position, valid mask). The contribution is
+    camera through ``cs``, its ``camera.sample_Wi(si.p, u)`` (default: the pinhole's):
+    (contribution to splat, film position, valid mask). The contribution is
     ``beta f*(wi, wo) |cos| corr We / pdf`` with the adjoint BSDF toward the camera,
     Veach's shading-normal factor and the camera's importance, zero where the shadow ray
-    is blocked."""
-    cs = camera.sample_Wi(si.p)
+    to the lens point is blocked."""
+    if cs is None:
+        cs = camera.sample_Wi(si.p)
     ok = active & cs.valid
     ok &= scene.geometry.unoccluded(si, cs.p, ok)
     wo_local = si.to_local(cs.wi)

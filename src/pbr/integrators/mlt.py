@@ -39,18 +39,20 @@ from ..samplers import IndependentSampler, seed_array
 from ..plugins.props import Props
 from ..spectrum import SampledWavelengths
 from .base import INTEGRATORS, SamplingIntegrator, _progress, pbrt_max_depth
-from .bdpt import (BDPTIntegrator, Strategies, CAMERA_VERTEX_DIMS, LIGHT_START_DIMS, LIGHT_VERTEX_DIMS)
-from .lightpath import SplatFilm
+from .bdpt import (BDPTIntegrator, Strategies, CAMERA_VERTEX_DIMS, LENS_DIMS, LIGHT_START_DIMS, LIGHT_VERTEX_DIMS)
+from .lightpath import SplatFilm, lens_sample
 
 CAMERA_START_DIMS = 4          # strategy, wavelengths, film position (x, y)
 BOOTSTRAP_BATCH = 1 << 17      # bootstrap samples per kernel (bounds the light-vertex store)
 
 
-def stream_dims(maxdepth: int) -> tuple[int, int]:
+def stream_dims(maxdepth: int, lens: bool = False) -> tuple[int, int]:
     """Coordinates of the camera and the light stream of a primary sample (at most what
-    BDPT's subpaths of ``maxdepth`` bounces draw)."""
-    return (CAMERA_START_DIMS + CAMERA_VERTEX_DIMS * (maxdepth + 1),
-            LIGHT_START_DIMS + LIGHT_VERTEX_DIMS * maxdepth)
+    BDPT's subpaths of ``maxdepth`` bounces draw); with a thin ``lens``, the camera ray's
+    lens point and each light vertex's connection to a lens point take LENS_DIMS more."""
+    extra = LENS_DIMS if lens else 0
+    return (CAMERA_START_DIMS + extra + CAMERA_VERTEX_DIMS * (maxdepth + 1),
+            LIGHT_START_DIMS + (LIGHT_VERTEX_DIMS + extra) * maxdepth)
 
 
 class PrimarySampleStream(Struct):
@@ -181,7 +183,7 @@ class MLTIntegrator(SamplingIntegrator):
 
     pass_separable = False    # Markov chains run on across passes
 
-    needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
+    needs_camera_importance = True  # connects paths to the camera (sample_Wi / its own camera rays)
     name = "mlt"
     bytes_per_lane = 112          # the float64 splat film and its development, per pixel (pbr.memory)
     supports_films = False        # develops its own channels (RGB films only)
@@ -210,6 +212,7 @@ class MLTIntegrator(SamplingIntegrator):
     def prepare(self, scene, sensor: int = 0) -> None:
         super().prepare(scene, sensor)
         self.bdpt.prepare(scene, sensor)
+        self.dims = stream_dims(max(self.maxdepth, 0), scene.sensors[sensor].needs_aperture_sample)
 
     # -- the path of a primary sample -------------------------------------------------
     def contribution(self, scene, camera, samples, depth):
@@ -227,7 +230,7 @@ class MLTIntegrator(SamplingIntegrator):
         t = depth + 2 - s
         wl = SampledWavelengths.sample_visible(cam_rng.next_float32())
         pos = mi.Point2f(cam_rng.next_float32(), cam_rng.next_float32())
-        ray = camera.sample_ray(pos)
+        ray = camera.sample_ray(pos, lens_sample(camera, cam_rng))
         strategies = Strategies(self.maxdepth, s, t)
         t1 = LaneSplats(n)
         store, n_light = self.bdpt.light_subpaths(scene, camera, light_rng, wl, strategies, t1.record)
@@ -359,6 +362,7 @@ class MLTIntegrator(SamplingIntegrator):
             return fn
         cam = scene.sensors[sensor]
         key = (id(scene), sensor, lanes, cam.to_world.tobytes(), cam.x_fov, cam.near_clip, cam.far_clip, cam.pp,
+               cam.needs_aperture_sample, cam.aperture_radius, cam.focus_distance,
                tuple(cam.film.size), id(cam.film.rfilter), self.sigma, self.large_step_probability)
         entry = self._recordings.get((fn.__name__, lanes))
         if entry is None or entry[0] != key:

@@ -1,5 +1,5 @@
 """``ptracer`` (Mitsuba's particle tracer; pbrt-v4's ``lightpath``): light tracing, every
-surface vertex of a light path connected to the pinhole and splatted on the film
+surface vertex of a light path connected to the camera (a pinhole or a thin lens) and splatted
 (:class:`pbr.integrators.lightpath.SplatFilm`). Conventions: docs/integrators.md.
 """
 
@@ -14,14 +14,14 @@ from ..samplers import IndependentSampler, IndependentStream, seed_array
 from ..spectrum import SampledWavelengths, first_only
 from ..plugins.props import SceneError
 from .base import INTEGRATORS, SamplingIntegrator, _progress, loop_ray, ray_state
-from .lightpath import (SplatFilm, connect_to_camera, sample_importance, shading_correction,
+from .lightpath import (SplatFilm, connect_to_camera, lens_sample, sample_importance, shading_correction,
                         start_light_path)
 
 
 @INTEGRATORS.register("ptracer", "lightpath")
 class ParticleTracerIntegrator(SamplingIntegrator):
     """``ptracer`` / ``lightpath`` (Mitsuba's particle tracer, pbrt-v4's light path
-    integrator): ``W H spp`` light paths, every surface vertex connected to the pinhole
+    integrator): ``W H spp`` light paths, every surface vertex connected to the camera
     and splatted on the film. No participating media.
 
     ================  ====  =======  ===============================================================
@@ -37,8 +37,10 @@ class ParticleTracerIntegrator(SamplingIntegrator):
 
     pass_separable = False    # the splat film (float64 sums) spans passes
 
-    needs_pinhole = True          # connects paths to the camera (sample_Wi / its own camera rays)
+    needs_camera_importance = True  # connects paths to the camera (sample_Wi / its own camera rays)
     name = "ptracer"
+    supports_films = False        # splats RGB (RGB films only)
+    supports_sensor_films = True  # with a camera sensor (pbrt-v4's rgb film: iso, maxcomponentvalue)
     bytes_per_lane = 48           # the light path and its camera connection (pbr.memory)
     traces_light_paths = True
 
@@ -98,7 +100,7 @@ class ParticleTracerIntegrator(SamplingIntegrator):
             # (so both estimate the same filtered image: Mitsuba's normalised splats).
             pos = mi.Point2f((mi.Float(pixel % w) + rng.next_float32()) / w,
                              (mi.Float(pixel // w) + rng.next_float32()) / h)
-            L = self._visible_emitters(scene, cam.sample_ray(pos), wl, active)
+            L = self._visible_emitters(scene, cam.sample_ray(pos, lens_sample(cam, rng)), wl, active)
             self.splats.splat(pos, L, wl, active)
         if self.max_depth < 0 or self.max_depth > 1:
             self._trace(scene, rng, wl, active)
@@ -149,7 +151,8 @@ class ParticleTracerIntegrator(SamplingIntegrator):
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, active)
 
             # Connect this vertex to the camera and splat.
-            contrib, pos, ok = connect_to_camera(scene, camera, si, bsdf_id, wl, beta, active)
+            cs = camera.sample_Wi(si.p, lens_sample(camera, rng))
+            contrib, pos, ok = connect_to_camera(scene, camera, si, bsdf_id, wl, beta, active, cs)
             splats.splat(pos, contrib, wl, ok)
 
             # Scatter (importance transport) to the next vertex.

@@ -1706,10 +1706,12 @@ class PBRTScene:
             _strip_private(v)
         sensor, integrator = self.sensor(), self.make_integrator()
         if integrator["type"] in ("bdpt", "mlt", "lightpath") and (
-                sensor["type"] != "perspective" or "lensradius" in sensor or "to_world_end" in sensor):
-            # pbr's light-tracing integrators connect paths to a static pinhole camera only.
-            self.unsupported(self.integrator, f"{integrator['type']!r} with a {sensor['type']!r} camera with a lens "
-                                              "or motion: 'volpath' is used")
+                sensor["type"] not in ("perspective", "thinlens") or "to_world_end" in sensor):
+            # pbr's light-tracing integrators connect paths to a static perspective camera
+            # (pinhole or thin lens) only.
+            what = "a moving" if sensor["type"] in ("perspective", "thinlens") else "an"
+            self.unsupported(self.integrator, f"{integrator['type']!r} with {what} {sensor['type']!r} camera: "
+                                              "'volpath' is used")
             integrator = {"type": "volpath", "max_depth": integrator.get("maxdepth", 5) + 1}
         if not any(isinstance(v, dict) and v.get("type") in ("ply", "sphere", "disk", "cylinder", "bsplinecurve",
                                                             "instance") for v in self.out.values()):
