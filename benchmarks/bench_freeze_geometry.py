@@ -114,7 +114,7 @@ def bench_pbr(d, a):
 
 def bench_mitsuba(d, a):
     variant = mi.variant()
-    mi.set_variant("llvm_ad_rgb")
+    mi.set_variant(f"{a.backend}_ad_rgb")   # Mitsuba's RGB variant of the chosen backend
     try:
         out = {}
         md = dict(d)

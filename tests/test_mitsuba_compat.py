@@ -238,7 +238,8 @@ def test_camera_errors():
         _sensor({"type": "thinlens", "film": film, "aperture_radius": 0.1,
                  "to_world": mi.ScalarTransform4f().scale(2.0)})
     with pytest.raises(SceneError, match=r"scene\.integrator: the 'ptracer' integrator connects paths to the "
-                                         r"camera, which needs a 'perspective' camera \(sensor 0 is 'orthographic'\)"):
+                                         r"camera, which needs a static 'perspective' or 'thinlens' camera "
+                                         r"\(sensor 0 is 'orthographic'\)"):
         pbr.load_dict({"type": "scene", "s": {"type": "sphere"}, "light": {"type": "constant"},
                        "cam": {"type": "orthographic", "film": film}, "integrator": {"type": "ptracer"}})
 
