@@ -1243,19 +1243,30 @@ class PBRTScene:
     # -- materials ----------------------------------------------------------------------------------------
     def _roughness(self, p: _Params, prefix: str = ""):
         """(alpha_u, alpha_v) from pbrt-v4's roughness parameters (``remaproughness``:
-        alpha = sqrt(roughness), TrowbridgeReitzDistribution::RoughnessToAlpha)."""
+        alpha = sqrt(roughness), TrowbridgeReitzDistribution::RoughnessToAlpha). pbrt-v4
+        remaps a roughness texture's value at each lookup: the texture is wrapped in pbr's
+        ``sqrt`` texture (the same dict for u and v when both come from ``roughness``)."""
         r = p.value(prefix + "roughness", 0.0, kind="float")
         ru, rv = p.value(prefix + "uroughness", r, kind="float"), p.value(prefix + "vroughness", r, kind="float")
         remap = p.bool("remaproughness", True)
-        out = []
-        for v in (ru, rv):
+        done = {}
+
+        def alpha(v):
             if isinstance(v, float):
-                out.append(math.sqrt(max(v, 0.0)) if remap else v)
-            else:
-                if remap:
-                    self.unsupported(p.d, "a roughness texture with remaproughness: the texture, not remapped, is used")
-                out.append(v)
-        return out
+                return math.sqrt(max(v, 0.0)) if remap else v
+            if not remap:
+                return v
+            if id(v) not in done:
+                if self.pbr_plugin(TEXTURE_TYPES, "sqrt"):
+                    done[id(v)] = {"type": "sqrt", "tex": v}
+                else:
+                    self.unsupported(p.d, "a roughness texture with remaproughness in a dict for Mitsuba 3 "
+                                          "(mitsuba=True: Mitsuba has no square-root texture): the texture, "
+                                          "not remapped, is used")
+                    done[id(v)] = v
+            return done[id(v)]
+
+        return [alpha(ru), alpha(rv)]
 
     def material(self, p: _Params, t: str) -> dict:
         b = self._material(p, t)
