@@ -114,6 +114,50 @@ def _mi_transform(m):
 # (from pbrt-v4's tables), used under ``approximate``.
 _GLASS_ND = {"glass-fk51a": 1.4869, "glass-lasf9": 1.8509, "glass-f5": 1.6732, "glass-f10": 1.7277}
 
+# -- colour spaces ------------------------------------------------------------------------
+
+# pbrt-v4's named RGB colour spaces (RGBColorSpace::Init): the xy chromaticities of the
+# red, green and blue primaries and the white of the space's illuminant (D65, and for
+# ACES2065-1 pbrt-v4's "illum-acesD60"). pbrt-v4's "dci-p3" is P3-D65 (Display P3), not
+# DCI's projector white.
+_D65_XY = (0.3127, 0.3290)
+COLOR_SPACES = {
+    "srgb": ((0.64, 0.33), (0.30, 0.60), (0.15, 0.06), _D65_XY),
+    "dci-p3": ((0.68, 0.32), (0.265, 0.690), (0.15, 0.06), _D65_XY),
+    "rec2020": ((0.708, 0.292), (0.170, 0.797), (0.131, 0.046), _D65_XY),
+    "aces2065-1": ((0.7347, 0.2653), (0.0, 1.0), (0.0001, -0.077), (0.32168, 0.33767)),
+}
+# Bradford's cone-response matrix (the von Kries adaptation is done in its space).
+_BRADFORD = np.array([[0.8951, 0.2664, -0.1614], [-0.7502, 1.7135, 0.0367], [0.0389, -0.0685, 1.0296]])
+
+
+def _xy_to_xyz(xy) -> np.ndarray:
+    x, y = xy
+    return np.array([x / y, 1.0, (1.0 - x - y) / y])
+
+
+def rgb_to_xyz_matrix(name: str) -> np.ndarray:
+    """XYZ from linear RGB of colour space ``name``: the primaries' XYZ scaled so that RGB
+    (1, 1, 1) is the space's white, of luminance 1 (as pbrt-v4's RGBColorSpace)."""
+    *prims, white = COLOR_SPACES[name]
+    P = np.stack([_xy_to_xyz(c) for c in prims], axis=1)
+    return P * np.linalg.solve(P, _xy_to_xyz(white))
+
+
+def color_space_to_srgb(name: str, adapt: bool) -> np.ndarray:
+    """The 3x3 matrix from linear RGB of pbrt-v4's colour space ``name`` to linear sRGB.
+    ``adapt`` (reflectances): the space's white is mapped to D65 by Bradford's adaptation,
+    since pbrt-v4 upsamples a reflectance against its space's own illuminant (RGB
+    (1, 1, 1) is a flat reflectance in every space); without it (illuminants) the colour
+    is kept as it is (ACES2065-1's (1, 1, 1) is light of D60's colour, as pbrt-v4 emits
+    its illuminant times the RGB's spectrum). The D65 spaces need no adaptation."""
+    m = rgb_to_xyz_matrix(name)
+    if adapt and COLOR_SPACES[name][3] != _D65_XY:
+        gain = (_BRADFORD @ _xy_to_xyz(_D65_XY)) / (_BRADFORD @ _xy_to_xyz(COLOR_SPACES[name][3]))
+        m = np.linalg.solve(_BRADFORD, gain[:, None] * _BRADFORD) @ m
+    return np.linalg.solve(rgb_to_xyz_matrix("srgb"), m)
+
+
 # pbrt-v4's named metal spectra and the Mitsuba IOR data of the same metal.
 _METALS = {"Ag": "Ag", "Al": "Al", "Au": "Au", "Cu": "Cu", "CuZn": "CuZn", "MgO": "MgO", "TiO2": "TiO2"}
 
@@ -450,6 +494,9 @@ class PBRTScene:
         h = getattr(self, f"_d_{d.name}", None)
         if h is None:
             raise XMLError(f"{d.where}: unknown directive {d.name!r}")
+        for q in d.params:          # pbrt-v4 ties each parameter to the colour space of its directive
+            if q.color_space is None:
+                q.color_space = self.state.color_space
         try:
             h(d)
         except XMLError:
@@ -576,10 +623,13 @@ class PBRTScene:
             self.note(q.where, f"Option {q.name!r} ignored (pbr has no pbrt-v4 options)")
 
     def _d_ColorSpace(self, d):
+        # pbrt-v4's RGBColorSpace::GetNamed: the name in any case. RGB parameters of later
+        # directives are converted to linear sRGB (see rgb_value).
         name, = self.args(d, 1)
-        if name.lower() != "srgb":
-            self.unsupported(d, f"color space {name!r} (pbr renders in linear sRGB)")
-        self.state.color_space = name
+        if name.lower() not in COLOR_SPACES:
+            raise XMLError(f"{d.where}: ColorSpace: unknown color space {name!r} "
+                           f"(pbrt-v4's: {', '.join(COLOR_SPACES)})")
+        self.state.color_space = name.lower()
 
     def _d_Accelerator(self, d):
         self.args(d, 1, allow_params=True)
@@ -623,6 +673,9 @@ class PBRTScene:
         self.camera_medium = self.state.outside
 
     def _d_Film(self, d):
+        if self.state.color_space != "srgb":
+            self.note(d.where, f"Film: pbrt-v4 writes the image in the color space {self.state.color_space!r}; "
+                               "pbr's films write linear sRGB (Rec. 709 primaries, D65)")
         self._option(d, "film")
 
     def _d_Sampler(self, d):
@@ -1060,7 +1113,7 @@ class PBRTScene:
         if q.type == "rgb":
             if len(q.values) != 3:
                 raise XMLError(f"{where}: {p.d.name}: parameter {q.name!r}: expected one RGB triple")
-            return {"type": "rgb", "value": [float(v) for v in q.values]}
+            return {"type": "rgb", "value": [float(v) for v in self.rgb_value(q, p, q.values, kind)]}
         if q.type == "blackbody":
             t = float(q.values[0])
             if t <= 0:
@@ -1080,6 +1133,29 @@ class PBRTScene:
             pairs = np.asarray(q.values, dtype=np.float64).reshape(-1, 2)
             return {"type": "spectrum", "value": [(float(a), float(b)) for a, b in pairs]}
         raise XMLError(f"{where}: {p.d.name}: parameter {q.name!r}: a {q.type} cannot be a spectrum or float")
+
+    def rgb_value(self, q: Param, p: _Params, values, kind: str) -> np.ndarray:
+        """RGB ``values`` (3 or (..., 3)) of parameter ``q`` as linear sRGB: unchanged in
+        pbrt-v4's default "srgb", else converted from ``q.color_space``
+        (:func:`color_space_to_srgb`; reflectances adapted to D65, illuminants not).
+        Colours outside sRGB's gamut get negative components, which pbr's spectral
+        upsampling cannot represent (pbrt-v4 clamps its own at 0 too): clipped at 0; a
+        reflectance (``kind`` 'albedo', given within [0, 1]) is also clipped at 1; an
+        unbounded or illuminant value keeps components above 1. Clipping is noted."""
+        a = np.asarray(values, dtype=np.float64).reshape(-1, 3)
+        cs = q.color_space or "srgb"
+        if cs == "srgb":
+            return a.reshape(np.shape(values))
+        out = a @ color_space_to_srgb(cs, adapt=kind != "illuminant").T
+        hi = 1.0 if kind in ("albedo", "float") and a.max(initial=0.0) <= 1.0 else np.inf
+        clipped = np.clip(out, 0.0, hi)
+        bad = np.abs(clipped - out).max(axis=1) > 1e-6
+        if bad.any():
+            i = int(np.argmax(bad))
+            self.note(q.where, f"{p.d.name}: parameter {q.name!r}: {int(bad.sum())} of {len(a)} RGB value(s) in "
+                               f"{cs!r} outside sRGB's gamut, clipped to {'[0, 1]' if hi == 1.0 else '[0, inf)'} "
+                               f"(e.g. {np.round(a[i], 6).tolist()} -> sRGB {np.round(out[i], 6).tolist()})")
+        return clipped.reshape(np.shape(values))
 
     def named_spectrum(self, name: str, q: Param, p: _Params, kind: str):
         lname = name.lower()
@@ -1451,8 +1527,9 @@ class PBRTScene:
         t = p.string("type")
         if t is None:
             raise p.error(None, "MakeNamedMedium needs \"string type\"")
-        common = {"sigma_a": p.value("sigma_a", 1.0, kind="unbounded"),
-                  "sigma_s": p.value("sigma_s", 1.0, kind="unbounded"),
+        grid = t == "rgbgrid"        # its sigma_a, sigma_s and Le are per-voxel RGB values (read below)
+        common = {"sigma_a": None if grid else p.value("sigma_a", 1.0, kind="unbounded"),
+                  "sigma_s": None if grid else p.value("sigma_s", 1.0, kind="unbounded"),
                   "scale": p.one("scale", "float", 1.0), "g": p.one("g", "float", 0.0)}
         preset = p.string("preset")
         if preset and t == "rgbgrid":
@@ -1470,7 +1547,7 @@ class PBRTScene:
                 self.note(p.p["preset"].where, f"MakeNamedMedium: preset {preset!r} replaces sigma_a and sigma_s "
                                                "(as in pbrt-v4)")
             common["sigma_a"], common["sigma_s"] = ({"type": "rgb", "value": list(c)} for c in coeffs)
-        le = p.value("Le", None, kind="illuminant")
+        le = None if grid else p.value("Le", None, kind="illuminant")
         if le is not None:
             common["Le"] = le
             common["Lescale"] = p.one("Lescale", "float", 1.0)
@@ -1498,7 +1575,8 @@ class PBRTScene:
                     continue
                 if len(q.values) != 3 * nx * ny * nz:
                     raise p.error(k, f"has {len(q.values) // 3} RGB values, nx*ny*nz = {nx * ny * nz}")
-                out[k] = np.asarray(q.values, dtype=np.float32).reshape(nz, ny, nx, 3)
+                rgb = self.rgb_value(q, p, q.values, "illuminant" if k == "Le" else "unbounded")
+                out[k] = np.asarray(rgb, dtype=np.float32).reshape(nz, ny, nx, 3)
             if "Le" in out:
                 out["Lescale"] = p.one("Lescale", "float", 1.0)
             return out
