@@ -225,3 +225,106 @@ def test_aces_reflectance_seen_under_d60_keeps_its_rgb():
     assert err < 0.01, err
     raw = color_space_to_srgb("aces2065-1", False) @ [1, 1, 1]
     assert np.abs(seen(np.clip(raw, 0, 1)) - 1).max() > 0.05
+
+
+# -- plymesh displacement -------------------------------------------------------------------------
+
+def _pbrt_refine(pos, tri, m, max_dist):
+    """pbrt-v4's TriQuadMesh::Refine transcribed as written: recursive longest-edge
+    bisection with a shared edge -> midpoint map; returns the final triangles as
+    sorted tuples of their vertex positions."""
+    pos = [np.asarray(p, float) for p in pos]
+    split, out = {}, []
+
+    def dist(a, b):
+        return np.linalg.norm((pos[a] - pos[b]) @ m[:3, :3].T)
+
+    def refine(v0, v1, v2):
+        d01, d12, d20 = dist(v0, v1), dist(v1, v2), dist(v2, v0)
+        if d01 < max_dist and d12 < max_dist and d20 < max_dist:
+            out.append(tuple(sorted(tuple(np.round(pos[v], 9)) for v in (v0, v1, v2))))
+            return
+        if d01 > d12:
+            v = (v0, v1, v2) if d01 > d20 else (v2, v0, v1)
+        else:
+            v = (v1, v2, v0) if d12 > d20 else (v2, v0, v1)
+        e = tuple(sorted(v[:2]))
+        if e not in split:
+            split[e] = len(pos)
+            pos.append((pos[v[0]] + pos[v[1]]) / 2)
+        refine(v[0], split[e], v[2])
+        refine(split[e], v[1], v[2])
+
+    for t in tri:
+        refine(*t)
+    return sorted(out)
+
+
+def test_refine_mesh_is_pbrts_recursion():
+    """The vectorised tessellation gives the triangles of pbrt-v4's recursion (render-space
+    edge lengths under a non-uniform scale)."""
+    from pbr.scene.pbrt import refine_mesh
+    rng = np.random.default_rng(7)
+    pos = np.concatenate([[[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], rng.random((4, 3)) + [2, 0, 0]])
+    tri = np.array([[0, 1, 3], [0, 3, 2], [4, 5, 6], [5, 7, 6]])
+    m = np.diag([2.0, 1.0, 0.5, 1.0])
+    p2, t2, _, _ = refine_mesh(pos, tri, np.tile([0.0, 0.0, 1.0], (8, 1)), np.zeros((8, 2)), m, 0.3)
+    got = sorted(tuple(sorted(tuple(np.round(p2[v], 9)) for v in t)) for t in t2)
+    assert len(got) > 40
+    assert got == _pbrt_refine(pos, tri, m, 0.3)
+
+
+def test_plymesh_displacement(tmp_path):
+    """A unit square (2 triangles, uv = xy) under Scale 2 1 1, displaced by a bilerp
+    texture (0.1 u + 0.2 v) with edgelength 0.3: every world-space edge is shorter than
+    0.3, the mesh has no cracks (each interior edge is shared by two triangles, the others
+    lie on the square's border), every vertex is moved along +z by the texture's value at
+    its uv, and the normals are those of the displaced plane."""
+    from pbr.scene.pbrt import _read_ply, write_ply
+    P = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], float)
+    write_ply(str(tmp_path / "sq.ply"), P, np.array([[0, 1, 3], [0, 3, 2]]), uv=P[:, :2].copy())
+    body = ('Texture "h" "float" "bilerp" "float v00" 0 "float v10" 0.1 "float v01" 0.2 "float v11" 0.3\n'
+            'Scale 2 1 1\nShape "plymesh" "string filename" "sq.ply" "texture displacement" "h" '
+            '"float edgelength" 0.3')
+    d, notes, _ = _dict(tmp_path, body, mesh_dir=str(tmp_path))
+    assert notes == []
+    pos, f, n, uv = _read_ply(_values(d, "ply")[0]["filename"], "x")
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    assert np.linalg.norm(pos[e[:, 0]] - pos[e[:, 1]], axis=1).max() < 0.3
+    assert len(f) > 50
+    keys, counts = np.unique(np.sort(e, axis=1), axis=0, return_counts=True)
+    border = keys[counts == 1]
+    x, y = pos[border][..., 0], pos[border][..., 1]
+    on_border = ((np.abs(x[:, 0] - x[:, 1]) < 1e-6) & np.isin(np.round(x[:, 0], 6), [0, 2])) | (
+        (np.abs(y[:, 0] - y[:, 1]) < 1e-6) & np.isin(np.round(y[:, 0], 6), [0, 1]))
+    assert counts.max() == 2 and on_border.all()
+    np.testing.assert_allclose(pos[:, 2], 0.1 * uv[:, 0] + 0.2 * uv[:, 1], atol=1e-6)
+    np.testing.assert_allclose(pos[:, 0], 2 * uv[:, 0], atol=1e-6)
+    ref = np.array([-0.05, -0.2, 1.0]) / np.linalg.norm([-0.05, -0.2, 1.0])
+    np.testing.assert_allclose(n, np.tile(ref, (len(n), 1)), atol=1e-5)
+    # A constant displacement moves every vertex along its normal; no uvs: an error.
+    d, _, _ = _dict(tmp_path, body.replace('"texture displacement" "h"', '"float displacement" 0.25'),
+                    name="const.pbrt", mesh_dir=str(tmp_path))
+    pos, _, _, _ = _read_ply(_values(d, "ply")[0]["filename"], "x")
+    np.testing.assert_allclose(pos[:, 2], 0.25, atol=1e-6)
+    write_ply(str(tmp_path / "nouv.ply"), P, np.array([[0, 1, 3], [0, 3, 2]]))
+    with pytest.raises(XMLError, match="displacement needs vertex uvs"):
+        _dict(tmp_path, body.replace("sq.ply", "nouv.ply"), name="nouv.pbrt", mesh_dir=str(tmp_path))
+
+
+@pytest.mark.parametrize("mitsuba", [False, True])
+def test_plymesh_displacement_by_an_image(tmp_path, mitsuba):
+    """A displacement texture of textures (a `scale` of an `imagemap` of 0.4, by -0.5)
+    is evaluated by pbr's texture set, also in a dict for Mitsuba 3 (its bitmap)."""
+    from pbr.image import write_image
+    from pbr.scene.pbrt import _read_ply, write_ply
+    P = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], float)
+    write_ply(str(tmp_path / "sq.ply"), P, np.array([[0, 1, 3], [0, 3, 2]]), uv=P[:, :2].copy())
+    write_image(str(tmp_path / "h.exr"), np.full((4, 4, 3), 0.4, np.float32))
+    body = ('Texture "i" "float" "imagemap" "string filename" "h.exr"\n'
+            'Texture "h" "float" "scale" "texture tex" "i" "float scale" -0.5\n'
+            'Shape "plymesh" "string filename" "sq.ply" "texture displacement" "h" "float edgelength" 0.5')
+    d, _, _ = _dict(tmp_path, body, mesh_dir=str(tmp_path), mitsuba=mitsuba, approximate=True)
+    pos, f, _, _ = _read_ply(_values(d, "ply")[0]["filename"], "x")
+    assert len(f) > 2
+    np.testing.assert_allclose(pos[:, 2], -0.2, atol=1e-6)

@@ -226,6 +226,48 @@ def _read_spd(path: str, where: str) -> np.ndarray:
 
 # -- mesh files ---------------------------------------------------------------------------
 
+class _TextureLoader:
+    """What pbr's texture loading functions read of a scene loader (the reader's texture
+    dicts are inline, their file names absolute): a texture set of its own."""
+
+    def __init__(self, base: str):
+        from ..textures import TextureSet
+        self.textures, self.texture_range, self.base = TextureSet(), None, base
+
+    def resolve_path(self, fname: str, path: str) -> str:
+        full = resolve(fname, self.base)
+        if not os.path.exists(full):
+            raise XMLError(f"{path}: file not found: {fname!r} (looked for {full})")
+        return full
+
+    def resolve_ref(self, oid: str, path: str):
+        raise XMLError(f"{path}: a reference ({oid!r}) cannot be evaluated here")
+
+
+def _texture_at(tex: dict, pos, n, uv, base: str) -> np.ndarray:
+    """Values of float texture ``tex`` (a pbr texture dict) at points ``pos`` with normals
+    ``n`` and coordinates ``uv``, evaluated by pbr's texture set with no pixel footprint
+    (the value at the first wavelength, as pbr reads float textures), as an unbounded
+    float (a height)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from ..textures import load_spectrum
+    with backend.pbr_variant():
+        loader = _TextureLoader(base)
+        slot = load_spectrum(loader, tex, "displacement", emitter=False, unbounded=True, scalar=True)
+        T = loader.textures
+        T.build()
+        si = dr.zeros(mi.SurfaceInteraction3f, len(pos))
+        si.p = mi.Point3f(*np.asarray(pos, np.float32).T)
+        si.n = mi.Normal3f(*np.asarray(n, np.float32).T)
+        si.sh_frame = mi.Frame3f(si.n)
+        si.uv = mi.Point2f(*np.asarray(uv, np.float32).T)
+        lam = dr.full(mi.Spectrum, 550.0, len(pos))
+        active = dr.full(mi.Bool, True, len(pos))
+        return np.array(T.eval(slot, si, lam, active, illuminant=False)[0], np.float64)
+
+
 def write_ply(path: str, p: np.ndarray, f: np.ndarray, n=None, uv=None) -> None:
     """A binary little-endian PLY file that Mitsuba's and pbr's loaders read."""
     cols = [p.astype("<f4")]
@@ -249,6 +291,64 @@ def write_ply(path: str, p: np.ndarray, f: np.ndarray, n=None, uv=None) -> None:
         out.write(vert.tobytes())
         out.write(faces.tobytes())
     os.replace(tmp, path)
+
+
+def vertex_normals(pos: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """pbrt-v4's TriQuadMesh::ComputeNormals: per vertex, the normalised sum of the unit
+    normals cross(p1 - p0, p2 - p1) of its triangles (0 where there are none)."""
+    fn = np.cross(pos[tri[:, 1]] - pos[tri[:, 0]], pos[tri[:, 2]] - pos[tri[:, 1]])
+    ln = np.linalg.norm(fn, axis=1, keepdims=True)
+    fn = np.where(ln > 0, fn / np.where(ln > 0, ln, 1.0), 0.0)
+    n = np.zeros_like(pos)
+    for k in range(3):
+        np.add.at(n, tri[:, k], fn)
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.where(ln > 0, n / np.where(ln > 0, ln, 1.0), 0.0)
+
+
+def refine_mesh(pos, tri, n, uv, render_from_object, max_dist: float):
+    """pbrt-v4's TriQuadMesh::Displace tessellation: every triangle with an edge of
+    render-space length >= ``max_dist`` is split at the midpoint of its longest edge
+    (pbrt-v4's order among equal lengths), until no edge is that long; a midpoint is shared
+    by the triangles on both sides of its edge (no cracks), its normal is the normalised
+    sum of the edge's, its uv the mean. Done in rounds over all triangles (the recursion's
+    result: each split depends on the triangle's own vertices only). Returns (pos, tri, n, uv)."""
+    pos, n, uv = [np.asarray(a, np.float64) for a in (pos, n, uv)]
+    tri = np.asarray(tri, np.int64).reshape(-1, 3)
+    m = np.asarray(render_from_object, np.float64)
+    done = []
+    split_keys, split_mid = np.zeros(0, np.int64), np.zeros(0, np.int64)   # edges split so far (sorted)
+    while len(tri):
+        pw = pos @ m[:3, :3].T + m[:3, 3]
+        d = np.stack([np.linalg.norm(pw[tri[:, a]] - pw[tri[:, b]], axis=1) for a, b in ((0, 1), (1, 2), (2, 0))], 1)
+        small = (d < max_dist).all(axis=1)
+        done.append(tri[small])
+        tri, d = tri[~small], d[~small]
+        if not len(tri):
+            break
+        # Rotate each triangle so that its longest edge is (v0, v1), as pbrt-v4 orders them.
+        first = np.where(d[:, 0] > d[:, 1], np.where(d[:, 0] > d[:, 2], 0, 2), np.where(d[:, 1] > d[:, 2], 1, 2))
+        v = np.stack([tri[np.arange(len(tri)), (first + k) % 3] for k in range(3)], axis=1)
+        lo, hi = np.minimum(v[:, 0], v[:, 1]), np.maximum(v[:, 0], v[:, 1])
+        key = lo * (1 << 31) + hi
+        # Midpoints of edges split in an earlier round are reused, new ones added once.
+        at = np.minimum(np.searchsorted(split_keys, key), max(len(split_keys) - 1, 0))
+        old = (split_keys[at] == key) if len(split_keys) else np.zeros(len(key), bool)
+        new_keys, inv = np.unique(key[~old], return_inverse=True)
+        a, b = new_keys >> 31, new_keys & ((1 << 31) - 1)
+        new_mid = len(pos) + np.arange(len(new_keys))
+        pos = np.concatenate([pos, 0.5 * (pos[a] + pos[b])])
+        nm = n[a] + n[b]
+        n = np.concatenate([n, nm / np.maximum(np.linalg.norm(nm, axis=1, keepdims=True), 1e-30)])
+        uv = np.concatenate([uv, 0.5 * (uv[a] + uv[b])])
+        vm = np.empty(len(key), np.int64)
+        vm[old] = split_mid[at[old]] if len(split_keys) else 0
+        vm[~old] = new_mid[inv.reshape(-1)]
+        order = np.argsort(np.concatenate([split_keys, new_keys]), kind="stable")
+        split_keys = np.concatenate([split_keys, new_keys])[order]
+        split_mid = np.concatenate([split_mid, new_mid])[order]
+        tri = np.concatenate([np.stack([v[:, 0], vm, v[:, 2]], 1), np.stack([vm, v[:, 1], v[:, 2]], 1)])
+    return pos, np.concatenate(done), n, uv
 
 
 def _read_ply(path: str, where: str):
@@ -1009,11 +1109,12 @@ class PBRTScene:
             full = resolve(fname, self.base)
             if not os.path.exists(full):
                 return self.missing(p.d.where, p.d.name, fname, full)
-            for k in ("displacement", "edgelength"):
-                if p.has(k):
-                    p.p[k].used = True
-                    self.unsupported(p.d, f"plymesh {k!r} (displacement mapping)")
             pos, f, n, uv = _read_ply(full, p.d.where)
+            if p.has("displacement"):
+                pos, f, n, uv = self.displace(p, pos, f, n, uv)
+            elif p.has("edgelength"):
+                p.p["edgelength"].used = True
+                self.note(p.p["edgelength"].where, "Shape: 'edgelength' without 'displacement' does nothing")
             return self.mesh(p, pos, f, n, uv)
         if t == "bilinearmesh":
             pos = p.array("P", "point3", 3)
@@ -1046,6 +1147,26 @@ class PBRTScene:
             raise p.error(None, f"{t!r} is a pbrt-v3 shape that pbrt-v4 removed")
         raise p.error(None, f"unknown shape {t!r} (pbrt-v4's: sphere, disk, cylinder, trianglemesh, plymesh, "
                              "bilinearmesh, loopsubdiv, curve)")
+
+    def displace(self, p: _Params, pos, tri, n, uv):
+        """pbrt-v4's true displacement of a ``plymesh`` (TriQuadMesh::Displace): the mesh
+        is tessellated until its render-space edges are shorter than ``edgelength`` (1),
+        each vertex moves by d n, d the float texture ``displacement`` evaluated at its
+        object-space position and uv (no filtering: pbrt-v4 gives no footprint), n its
+        normal (the file's, else pbrt-v4's vertex normals), and the normals are recomputed
+        from the displaced triangles."""
+        if uv is None:
+            raise p.error("displacement", "displacement needs vertex uvs in the PLY file (as pbrt-v4)")
+        edge = p.one("edgelength", "float", 1.0)
+        if not edge > 0:
+            raise p.error("edgelength", f"must be positive, got {edge}")
+        tex = p.value("displacement", 0.0, kind="float")
+        if n is None:
+            n = vertex_normals(np.asarray(pos, np.float64), np.asarray(tri, np.int64).reshape(-1, 3))
+        pos, tri, n, uv = refine_mesh(pos, tri, n, uv, self.ctm(), edge)
+        d = np.full(len(pos), tex) if isinstance(tex, float) else _texture_at(tex, pos, n, uv, self.base)
+        pos = pos + d[:, None] * n
+        return pos, tri, vertex_normals(pos, tri), uv
 
     def curve(self, p: _Params) -> dict:
         """pbrt-v4 curves as Mitsuba's ``bsplinecurve`` (round tubes; cubic Bezier control
