@@ -302,6 +302,13 @@ def test_plymesh_displacement(tmp_path):
     np.testing.assert_allclose(pos[:, 0], 2 * uv[:, 0], atol=1e-6)
     ref = np.array([-0.05, -0.2, 1.0]) / np.linalg.norm([-0.05, -0.2, 1.0])
     np.testing.assert_allclose(n, np.tile(ref, (len(n), 1)), atol=1e-5)
+    # pbrt-v4's Option "displacementedgescale" multiplies edgelength.
+    d, notes, _ = _dict(tmp_path, body, film='Option "float displacementedgescale" 0.5', name="opt.pbrt",
+                        mesh_dir=str(tmp_path))
+    pos2, f2, _, _ = _read_ply(_values(d, "ply")[0]["filename"], "x")
+    e2 = np.concatenate([f2[:, [0, 1]], f2[:, [1, 2]], f2[:, [2, 0]]])
+    assert np.linalg.norm(pos2[e2[:, 0]] - pos2[e2[:, 1]], axis=1).max() < 0.15 and len(f2) > 3 * len(f)
+    assert not any("displacementedgescale" in n for n in notes)
     # A constant displacement moves every vertex along its normal; no uvs: an error.
     d, _, _ = _dict(tmp_path, body.replace('"texture displacement" "h"', '"float displacement" 0.25'),
                     name="const.pbrt", mesh_dir=str(tmp_path))

@@ -495,6 +495,7 @@ class PBRTScene:
         self.base = os.path.dirname(self.path)
         self.approximate = approximate
         self.mesh_dir = mesh_dir or os.path.join(tempfile.gettempdir(), "pbr-pbrt-meshes")
+        self.displacement_edge_scale = 1.0      # pbrt-v4's Option "displacementedgescale"
         self.overrides = dict(overrides or {})
         self.notes: list[str] = []
         self.state = _State()
@@ -720,6 +721,10 @@ class PBRTScene:
     def _d_Option(self, d):
         self.args(d, 0, allow_params=True)
         for q in d.params:
+            if q.name == "displacementedgescale" and q.type in ("float", "integer") and len(q.values) == 1:
+                # pbrt-v4 multiplies every plymesh's 'edgelength' by it
+                self.displacement_edge_scale = float(q.values[0])
+                continue
             self.note(q.where, f"Option {q.name!r} ignored (pbr has no pbrt-v4 options)")
 
     def _d_ColorSpace(self, d):
@@ -1157,7 +1162,7 @@ class PBRTScene:
         from the displaced triangles."""
         if uv is None:
             raise p.error("displacement", "displacement needs vertex uvs in the PLY file (as pbrt-v4)")
-        edge = p.one("edgelength", "float", 1.0)
+        edge = p.one("edgelength", "float", 1.0) * self.displacement_edge_scale
         if not edge > 0:
             raise p.error("edgelength", f"must be positive, got {edge}")
         tex = p.value("displacement", 0.0, kind="float")
