@@ -1166,6 +1166,8 @@ class PBRTScene:
         if not edge > 0:
             raise p.error("edgelength", f"must be positive, got {edge}")
         tex = p.value("displacement", 0.0, kind="float")
+        if not np.isfinite(np.asarray(pos, np.float64)).all():
+            raise p.error("filename", "the mesh has non-finite vertex positions: it cannot be tessellated")
         if n is None:
             n = vertex_normals(np.asarray(pos, np.float64), np.asarray(tri, np.int64).reshape(-1, 3))
         pos, tri, n, uv = refine_mesh(pos, tri, n, uv, self.ctm(), edge)
