@@ -114,6 +114,50 @@ def _mi_transform(m):
 # (from pbrt-v4's tables), used under ``approximate``.
 _GLASS_ND = {"glass-fk51a": 1.4869, "glass-lasf9": 1.8509, "glass-f5": 1.6732, "glass-f10": 1.7277}
 
+# -- colour spaces ------------------------------------------------------------------------
+
+# pbrt-v4's named RGB colour spaces (RGBColorSpace::Init): the xy chromaticities of the
+# red, green and blue primaries and the white of the space's illuminant (D65, and for
+# ACES2065-1 pbrt-v4's "illum-acesD60"). pbrt-v4's "dci-p3" is P3-D65 (Display P3), not
+# DCI's projector white.
+_D65_XY = (0.3127, 0.3290)
+COLOR_SPACES = {
+    "srgb": ((0.64, 0.33), (0.30, 0.60), (0.15, 0.06), _D65_XY),
+    "dci-p3": ((0.68, 0.32), (0.265, 0.690), (0.15, 0.06), _D65_XY),
+    "rec2020": ((0.708, 0.292), (0.170, 0.797), (0.131, 0.046), _D65_XY),
+    "aces2065-1": ((0.7347, 0.2653), (0.0, 1.0), (0.0001, -0.077), (0.32168, 0.33767)),
+}
+# Bradford's cone-response matrix (the von Kries adaptation is done in its space).
+_BRADFORD = np.array([[0.8951, 0.2664, -0.1614], [-0.7502, 1.7135, 0.0367], [0.0389, -0.0685, 1.0296]])
+
+
+def _xy_to_xyz(xy) -> np.ndarray:
+    x, y = xy
+    return np.array([x / y, 1.0, (1.0 - x - y) / y])
+
+
+def rgb_to_xyz_matrix(name: str) -> np.ndarray:
+    """XYZ from linear RGB of colour space ``name``: the primaries' XYZ scaled so that RGB
+    (1, 1, 1) is the space's white, of luminance 1 (as pbrt-v4's RGBColorSpace)."""
+    *prims, white = COLOR_SPACES[name]
+    P = np.stack([_xy_to_xyz(c) for c in prims], axis=1)
+    return P * np.linalg.solve(P, _xy_to_xyz(white))
+
+
+def color_space_to_srgb(name: str, adapt: bool) -> np.ndarray:
+    """The 3x3 matrix from linear RGB of pbrt-v4's colour space ``name`` to linear sRGB.
+    ``adapt`` (reflectances): the space's white is mapped to D65 by Bradford's adaptation,
+    since pbrt-v4 upsamples a reflectance against its space's own illuminant (RGB
+    (1, 1, 1) is a flat reflectance in every space); without it (illuminants) the colour
+    is kept as it is (ACES2065-1's (1, 1, 1) is light of D60's colour, as pbrt-v4 emits
+    its illuminant times the RGB's spectrum). The D65 spaces need no adaptation."""
+    m = rgb_to_xyz_matrix(name)
+    if adapt and COLOR_SPACES[name][3] != _D65_XY:
+        gain = (_BRADFORD @ _xy_to_xyz(_D65_XY)) / (_BRADFORD @ _xy_to_xyz(COLOR_SPACES[name][3]))
+        m = np.linalg.solve(_BRADFORD, gain[:, None] * _BRADFORD) @ m
+    return np.linalg.solve(rgb_to_xyz_matrix("srgb"), m)
+
+
 # pbrt-v4's named metal spectra and the Mitsuba IOR data of the same metal.
 _METALS = {"Ag": "Ag", "Al": "Al", "Au": "Au", "Cu": "Cu", "CuZn": "CuZn", "MgO": "MgO", "TiO2": "TiO2"}
 
@@ -182,6 +226,48 @@ def _read_spd(path: str, where: str) -> np.ndarray:
 
 # -- mesh files ---------------------------------------------------------------------------
 
+class _TextureLoader:
+    """What pbr's texture loading functions read of a scene loader (the reader's texture
+    dicts are inline, their file names absolute): a texture set of its own."""
+
+    def __init__(self, base: str):
+        from ..textures import TextureSet
+        self.textures, self.texture_range, self.base = TextureSet(), None, base
+
+    def resolve_path(self, fname: str, path: str) -> str:
+        full = resolve(fname, self.base)
+        if not os.path.exists(full):
+            raise XMLError(f"{path}: file not found: {fname!r} (looked for {full})")
+        return full
+
+    def resolve_ref(self, oid: str, path: str):
+        raise XMLError(f"{path}: a reference ({oid!r}) cannot be evaluated here")
+
+
+def _texture_at(tex: dict, pos, n, uv, base: str) -> np.ndarray:
+    """Values of float texture ``tex`` (a pbr texture dict) at points ``pos`` with normals
+    ``n`` and coordinates ``uv``, evaluated by pbr's texture set with no pixel footprint
+    (the value at the first wavelength, as pbr reads float textures), as an unbounded
+    float (a height)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from ..textures import load_spectrum
+    with backend.pbr_variant():
+        loader = _TextureLoader(base)
+        slot = load_spectrum(loader, tex, "displacement", emitter=False, unbounded=True, scalar=True)
+        T = loader.textures
+        T.build()
+        si = dr.zeros(mi.SurfaceInteraction3f, len(pos))
+        si.p = mi.Point3f(*np.asarray(pos, np.float32).T)
+        si.n = mi.Normal3f(*np.asarray(n, np.float32).T)
+        si.sh_frame = mi.Frame3f(si.n)
+        si.uv = mi.Point2f(*np.asarray(uv, np.float32).T)
+        lam = dr.full(mi.Spectrum, 550.0, len(pos))
+        active = dr.full(mi.Bool, True, len(pos))
+        return np.array(T.eval(slot, si, lam, active, illuminant=False)[0], np.float64)
+
+
 def write_ply(path: str, p: np.ndarray, f: np.ndarray, n=None, uv=None) -> None:
     """A binary little-endian PLY file that Mitsuba's and pbr's loaders read."""
     cols = [p.astype("<f4")]
@@ -205,6 +291,64 @@ def write_ply(path: str, p: np.ndarray, f: np.ndarray, n=None, uv=None) -> None:
         out.write(vert.tobytes())
         out.write(faces.tobytes())
     os.replace(tmp, path)
+
+
+def vertex_normals(pos: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """pbrt-v4's TriQuadMesh::ComputeNormals: per vertex, the normalised sum of the unit
+    normals cross(p1 - p0, p2 - p1) of its triangles (0 where there are none)."""
+    fn = np.cross(pos[tri[:, 1]] - pos[tri[:, 0]], pos[tri[:, 2]] - pos[tri[:, 1]])
+    ln = np.linalg.norm(fn, axis=1, keepdims=True)
+    fn = np.where(ln > 0, fn / np.where(ln > 0, ln, 1.0), 0.0)
+    n = np.zeros_like(pos)
+    for k in range(3):
+        np.add.at(n, tri[:, k], fn)
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.where(ln > 0, n / np.where(ln > 0, ln, 1.0), 0.0)
+
+
+def refine_mesh(pos, tri, n, uv, render_from_object, max_dist: float):
+    """pbrt-v4's TriQuadMesh::Displace tessellation: every triangle with an edge of
+    render-space length >= ``max_dist`` is split at the midpoint of its longest edge
+    (pbrt-v4's order among equal lengths), until no edge is that long; a midpoint is shared
+    by the triangles on both sides of its edge (no cracks), its normal is the normalised
+    sum of the edge's, its uv the mean. Done in rounds over all triangles (the recursion's
+    result: each split depends on the triangle's own vertices only). Returns (pos, tri, n, uv)."""
+    pos, n, uv = [np.asarray(a, np.float64) for a in (pos, n, uv)]
+    tri = np.asarray(tri, np.int64).reshape(-1, 3)
+    m = np.asarray(render_from_object, np.float64)
+    done = []
+    split_keys, split_mid = np.zeros(0, np.int64), np.zeros(0, np.int64)   # edges split so far (sorted)
+    while len(tri):
+        pw = pos @ m[:3, :3].T + m[:3, 3]
+        d = np.stack([np.linalg.norm(pw[tri[:, a]] - pw[tri[:, b]], axis=1) for a, b in ((0, 1), (1, 2), (2, 0))], 1)
+        small = (d < max_dist).all(axis=1)
+        done.append(tri[small])
+        tri, d = tri[~small], d[~small]
+        if not len(tri):
+            break
+        # Rotate each triangle so that its longest edge is (v0, v1), as pbrt-v4 orders them.
+        first = np.where(d[:, 0] > d[:, 1], np.where(d[:, 0] > d[:, 2], 0, 2), np.where(d[:, 1] > d[:, 2], 1, 2))
+        v = np.stack([tri[np.arange(len(tri)), (first + k) % 3] for k in range(3)], axis=1)
+        lo, hi = np.minimum(v[:, 0], v[:, 1]), np.maximum(v[:, 0], v[:, 1])
+        key = lo * (1 << 31) + hi
+        # Midpoints of edges split in an earlier round are reused, new ones added once.
+        at = np.minimum(np.searchsorted(split_keys, key), max(len(split_keys) - 1, 0))
+        old = (split_keys[at] == key) if len(split_keys) else np.zeros(len(key), bool)
+        new_keys, inv = np.unique(key[~old], return_inverse=True)
+        a, b = new_keys >> 31, new_keys & ((1 << 31) - 1)
+        new_mid = len(pos) + np.arange(len(new_keys))
+        pos = np.concatenate([pos, 0.5 * (pos[a] + pos[b])])
+        nm = n[a] + n[b]
+        n = np.concatenate([n, nm / np.maximum(np.linalg.norm(nm, axis=1, keepdims=True), 1e-30)])
+        uv = np.concatenate([uv, 0.5 * (uv[a] + uv[b])])
+        vm = np.empty(len(key), np.int64)
+        vm[old] = split_mid[at[old]] if len(split_keys) else 0
+        vm[~old] = new_mid[inv.reshape(-1)]
+        order = np.argsort(np.concatenate([split_keys, new_keys]), kind="stable")
+        split_keys = np.concatenate([split_keys, new_keys])[order]
+        split_mid = np.concatenate([split_mid, new_mid])[order]
+        tri = np.concatenate([np.stack([v[:, 0], vm, v[:, 2]], 1), np.stack([vm, v[:, 1], v[:, 2]], 1)])
+    return pos, np.concatenate(done), n, uv
 
 
 def _read_ply(path: str, where: str):
@@ -351,6 +495,7 @@ class PBRTScene:
         self.base = os.path.dirname(self.path)
         self.approximate = approximate
         self.mesh_dir = mesh_dir or os.path.join(tempfile.gettempdir(), "pbr-pbrt-meshes")
+        self.displacement_edge_scale = 1.0      # pbrt-v4's Option "displacementedgescale"
         self.overrides = dict(overrides or {})
         self.notes: list[str] = []
         self.state = _State()
@@ -450,6 +595,9 @@ class PBRTScene:
         h = getattr(self, f"_d_{d.name}", None)
         if h is None:
             raise XMLError(f"{d.where}: unknown directive {d.name!r}")
+        for q in d.params:          # pbrt-v4 ties each parameter to the colour space of its directive
+            if q.color_space is None:
+                q.color_space = self.state.color_space
         try:
             h(d)
         except XMLError:
@@ -573,13 +721,20 @@ class PBRTScene:
     def _d_Option(self, d):
         self.args(d, 0, allow_params=True)
         for q in d.params:
+            if q.name == "displacementedgescale" and q.type in ("float", "integer") and len(q.values) == 1:
+                # pbrt-v4 multiplies every plymesh's 'edgelength' by it
+                self.displacement_edge_scale = float(q.values[0])
+                continue
             self.note(q.where, f"Option {q.name!r} ignored (pbr has no pbrt-v4 options)")
 
     def _d_ColorSpace(self, d):
+        # pbrt-v4's RGBColorSpace::GetNamed: the name in any case. RGB parameters of later
+        # directives are converted to linear sRGB (see rgb_value).
         name, = self.args(d, 1)
-        if name.lower() != "srgb":
-            self.unsupported(d, f"color space {name!r} (pbr renders in linear sRGB)")
-        self.state.color_space = name
+        if name.lower() not in COLOR_SPACES:
+            raise XMLError(f"{d.where}: ColorSpace: unknown color space {name!r} "
+                           f"(pbrt-v4's: {', '.join(COLOR_SPACES)})")
+        self.state.color_space = name.lower()
 
     def _d_Accelerator(self, d):
         self.args(d, 1, allow_params=True)
@@ -623,6 +778,9 @@ class PBRTScene:
         self.camera_medium = self.state.outside
 
     def _d_Film(self, d):
+        if self.state.color_space != "srgb":
+            self.note(d.where, f"Film: pbrt-v4 writes the image in the color space {self.state.color_space!r}; "
+                               "pbr's films write linear sRGB (Rec. 709 primaries, D65)")
         self._option(d, "film")
 
     def _d_Sampler(self, d):
@@ -956,11 +1114,12 @@ class PBRTScene:
             full = resolve(fname, self.base)
             if not os.path.exists(full):
                 return self.missing(p.d.where, p.d.name, fname, full)
-            for k in ("displacement", "edgelength"):
-                if p.has(k):
-                    p.p[k].used = True
-                    self.unsupported(p.d, f"plymesh {k!r} (displacement mapping)")
             pos, f, n, uv = _read_ply(full, p.d.where)
+            if p.has("displacement"):
+                pos, f, n, uv = self.displace(p, pos, f, n, uv)
+            elif p.has("edgelength"):
+                p.p["edgelength"].used = True
+                self.note(p.p["edgelength"].where, "Shape: 'edgelength' without 'displacement' does nothing")
             return self.mesh(p, pos, f, n, uv)
         if t == "bilinearmesh":
             pos = p.array("P", "point3", 3)
@@ -993,6 +1152,28 @@ class PBRTScene:
             raise p.error(None, f"{t!r} is a pbrt-v3 shape that pbrt-v4 removed")
         raise p.error(None, f"unknown shape {t!r} (pbrt-v4's: sphere, disk, cylinder, trianglemesh, plymesh, "
                              "bilinearmesh, loopsubdiv, curve)")
+
+    def displace(self, p: _Params, pos, tri, n, uv):
+        """pbrt-v4's true displacement of a ``plymesh`` (TriQuadMesh::Displace): the mesh
+        is tessellated until its render-space edges are shorter than ``edgelength`` (1),
+        each vertex moves by d n, d the float texture ``displacement`` evaluated at its
+        object-space position and uv (no filtering: pbrt-v4 gives no footprint), n its
+        normal (the file's, else pbrt-v4's vertex normals), and the normals are recomputed
+        from the displaced triangles."""
+        if uv is None:
+            raise p.error("displacement", "displacement needs vertex uvs in the PLY file (as pbrt-v4)")
+        edge = p.one("edgelength", "float", 1.0) * self.displacement_edge_scale
+        if not edge > 0:
+            raise p.error("edgelength", f"must be positive, got {edge}")
+        tex = p.value("displacement", 0.0, kind="float")
+        if not np.isfinite(np.asarray(pos, np.float64)).all():
+            raise p.error("filename", "the mesh has non-finite vertex positions: it cannot be tessellated")
+        if n is None:
+            n = vertex_normals(np.asarray(pos, np.float64), np.asarray(tri, np.int64).reshape(-1, 3))
+        pos, tri, n, uv = refine_mesh(pos, tri, n, uv, self.ctm(), edge)
+        d = np.full(len(pos), tex) if isinstance(tex, float) else _texture_at(tex, pos, n, uv, self.base)
+        pos = pos + d[:, None] * n
+        return pos, tri, vertex_normals(pos, tri), uv
 
     def curve(self, p: _Params) -> dict:
         """pbrt-v4 curves as Mitsuba's ``bsplinecurve`` (round tubes; cubic Bezier control
@@ -1060,7 +1241,7 @@ class PBRTScene:
         if q.type == "rgb":
             if len(q.values) != 3:
                 raise XMLError(f"{where}: {p.d.name}: parameter {q.name!r}: expected one RGB triple")
-            return {"type": "rgb", "value": [float(v) for v in q.values]}
+            return {"type": "rgb", "value": [float(v) for v in self.rgb_value(q, p, q.values, kind)]}
         if q.type == "blackbody":
             t = float(q.values[0])
             if t <= 0:
@@ -1080,6 +1261,29 @@ class PBRTScene:
             pairs = np.asarray(q.values, dtype=np.float64).reshape(-1, 2)
             return {"type": "spectrum", "value": [(float(a), float(b)) for a, b in pairs]}
         raise XMLError(f"{where}: {p.d.name}: parameter {q.name!r}: a {q.type} cannot be a spectrum or float")
+
+    def rgb_value(self, q: Param, p: _Params, values, kind: str) -> np.ndarray:
+        """RGB ``values`` (3 or (..., 3)) of parameter ``q`` as linear sRGB: unchanged in
+        pbrt-v4's default "srgb", else converted from ``q.color_space``
+        (:func:`color_space_to_srgb`; reflectances adapted to D65, illuminants not).
+        Colours outside sRGB's gamut get negative components, which pbr's spectral
+        upsampling cannot represent (pbrt-v4 clamps its own at 0 too): clipped at 0; a
+        reflectance (``kind`` 'albedo', given within [0, 1]) is also clipped at 1; an
+        unbounded or illuminant value keeps components above 1. Clipping is noted."""
+        a = np.asarray(values, dtype=np.float64).reshape(-1, 3)
+        cs = q.color_space or "srgb"
+        if cs == "srgb":
+            return a.reshape(np.shape(values))
+        out = a @ color_space_to_srgb(cs, adapt=kind != "illuminant").T
+        hi = 1.0 if kind in ("albedo", "float") and a.max(initial=0.0) <= 1.0 else np.inf
+        clipped = np.clip(out, 0.0, hi)
+        bad = np.abs(clipped - out).max(axis=1) > 1e-6
+        if bad.any():
+            i = int(np.argmax(bad))
+            self.note(q.where, f"{p.d.name}: parameter {q.name!r}: {int(bad.sum())} of {len(a)} RGB value(s) in "
+                               f"{cs!r} outside sRGB's gamut, clipped to {'[0, 1]' if hi == 1.0 else '[0, inf)'} "
+                               f"(e.g. {np.round(a[i], 6).tolist()} -> sRGB {np.round(out[i], 6).tolist()})")
+        return clipped.reshape(np.shape(values))
 
     def named_spectrum(self, name: str, q: Param, p: _Params, kind: str):
         lname = name.lower()
@@ -1243,19 +1447,30 @@ class PBRTScene:
     # -- materials ----------------------------------------------------------------------------------------
     def _roughness(self, p: _Params, prefix: str = ""):
         """(alpha_u, alpha_v) from pbrt-v4's roughness parameters (``remaproughness``:
-        alpha = sqrt(roughness), TrowbridgeReitzDistribution::RoughnessToAlpha)."""
+        alpha = sqrt(roughness), TrowbridgeReitzDistribution::RoughnessToAlpha). pbrt-v4
+        remaps a roughness texture's value at each lookup: the texture is wrapped in pbr's
+        ``sqrt`` texture (the same dict for u and v when both come from ``roughness``)."""
         r = p.value(prefix + "roughness", 0.0, kind="float")
         ru, rv = p.value(prefix + "uroughness", r, kind="float"), p.value(prefix + "vroughness", r, kind="float")
         remap = p.bool("remaproughness", True)
-        out = []
-        for v in (ru, rv):
+        done = {}
+
+        def alpha(v):
             if isinstance(v, float):
-                out.append(math.sqrt(max(v, 0.0)) if remap else v)
-            else:
-                if remap:
-                    self.unsupported(p.d, "a roughness texture with remaproughness: the texture, not remapped, is used")
-                out.append(v)
-        return out
+                return math.sqrt(max(v, 0.0)) if remap else v
+            if not remap:
+                return v
+            if id(v) not in done:
+                if self.pbr_plugin(TEXTURE_TYPES, "sqrt"):
+                    done[id(v)] = {"type": "sqrt", "tex": v}
+                else:
+                    self.unsupported(p.d, "a roughness texture with remaproughness in a dict for Mitsuba 3 "
+                                          "(mitsuba=True: Mitsuba has no square-root texture): the texture, "
+                                          "not remapped, is used")
+                    done[id(v)] = v
+            return done[id(v)]
+
+        return [alpha(ru), alpha(rv)]
 
     def material(self, p: _Params, t: str) -> dict:
         b = self._material(p, t)
@@ -1440,8 +1655,9 @@ class PBRTScene:
         t = p.string("type")
         if t is None:
             raise p.error(None, "MakeNamedMedium needs \"string type\"")
-        common = {"sigma_a": p.value("sigma_a", 1.0, kind="unbounded"),
-                  "sigma_s": p.value("sigma_s", 1.0, kind="unbounded"),
+        grid = t == "rgbgrid"        # its sigma_a, sigma_s and Le are per-voxel RGB values (read below)
+        common = {"sigma_a": None if grid else p.value("sigma_a", 1.0, kind="unbounded"),
+                  "sigma_s": None if grid else p.value("sigma_s", 1.0, kind="unbounded"),
                   "scale": p.one("scale", "float", 1.0), "g": p.one("g", "float", 0.0)}
         preset = p.string("preset")
         if preset and t == "rgbgrid":
@@ -1459,7 +1675,7 @@ class PBRTScene:
                 self.note(p.p["preset"].where, f"MakeNamedMedium: preset {preset!r} replaces sigma_a and sigma_s "
                                                "(as in pbrt-v4)")
             common["sigma_a"], common["sigma_s"] = ({"type": "rgb", "value": list(c)} for c in coeffs)
-        le = p.value("Le", None, kind="illuminant")
+        le = None if grid else p.value("Le", None, kind="illuminant")
         if le is not None:
             common["Le"] = le
             common["Lescale"] = p.one("Lescale", "float", 1.0)
@@ -1487,7 +1703,8 @@ class PBRTScene:
                     continue
                 if len(q.values) != 3 * nx * ny * nz:
                     raise p.error(k, f"has {len(q.values) // 3} RGB values, nx*ny*nz = {nx * ny * nz}")
-                out[k] = np.asarray(q.values, dtype=np.float32).reshape(nz, ny, nx, 3)
+                rgb = self.rgb_value(q, p, q.values, "illuminant" if k == "Le" else "unbounded")
+                out[k] = np.asarray(rgb, dtype=np.float32).reshape(nz, ny, nx, 3)
             if "Le" in out:
                 out["Lescale"] = p.one("Lescale", "float", 1.0)
             return out

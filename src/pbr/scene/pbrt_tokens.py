@@ -58,12 +58,15 @@ class Token:
 class Param:
     """A parameter: its pbrt-v4 ``type`` (synonyms resolved), ``name``, ``values`` (floats,
     ints, bools or strings) and where it was declared. ``used`` marks parameters that
-    the converter read, so that the rest can be reported."""
+    the converter read, so that the rest can be reported; ``color_space``: the
+    ``ColorSpace`` its RGB values are in (set when its directive runs, as pbrt-v4 ties
+    it to each parameter, also to ``Attribute`` defaults)."""
     type: str
     name: str
     values: list
     where: str
     used: bool = False
+    color_space: str | None = None
 
 
 @dataclass

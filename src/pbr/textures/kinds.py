@@ -15,7 +15,7 @@ from .. import spectrum as spec
 # Slot kinds.
 CONSTANT, CHECKERBOARD, BITMAP, COMPOSITE, MESH_ATTRIBUTE, PROCEDURAL, MIPMAP = 0, 1, 2, 3, 4, 5, 6
 # Composite operations.
-OP_SCALE, OP_MIX, OP_CHECKER = 0, 1, 2
+OP_SCALE, OP_MIX, OP_CHECKER, OP_SQRT = 0, 1, 2, 3
 # Base spectrum of a constant.
 BASE_ONE, BASE_SIGMOID, BASE_TABLE = 0, 1, 2
 
@@ -85,9 +85,10 @@ class Bitmap:
 
 
 class Composite:
-    """A combinator node over other slots: ``scale`` (x * m), ``mix`` (x + m (y - x)) or a
+    """A combinator node over other slots: ``scale`` (x * m), ``mix`` (x + m (y - x)), a
     ``checkerboard`` with non-constant colours (x where the checker pattern of ``to_uv``
-    is even, y elsewhere). Its own parameters are its children's."""
+    is even, y elsewhere) or ``sqrt`` (sqrt(max(x, 0)): pbrt-v4's ``remaproughness`` of a
+    roughness texture). Its own parameters are its children's."""
 
     kind = COMPOSITE
 
@@ -102,7 +103,8 @@ class Composite:
     @property
     def children(self) -> tuple:
         """The slots the operation reads."""
-        return {OP_SCALE: (self.x, self.m), OP_MIX: (self.x, self.y, self.m), OP_CHECKER: (self.x, self.y)}[self.op]
+        return {OP_SCALE: (self.x, self.m), OP_MIX: (self.x, self.y, self.m), OP_CHECKER: (self.x, self.y),
+                OP_SQRT: (self.x,)}[self.op]
 
 
 class MeshAttribute:

@@ -29,8 +29,8 @@ from ..plugins.params import check_params
 from ..plugins.props import ALBEDO, FINITE, RADIANCE, UNIT, Props, Range, SceneError, did_you_mean
 from ..plugins.registry import Registry
 from . import meshattr, mipmap, procedural
-from .kinds import (BASE_ONE, BASE_SIGMOID, BASE_TABLE, CONSTANT, OP_CHECKER, OP_MIX, OP_SCALE, TAB_N, Bitmap,
-                    Checkerboard, Composite, ConstantSpectrum, MeshAttribute)
+from .kinds import (BASE_ONE, BASE_SIGMOID, BASE_TABLE, CONSTANT, OP_CHECKER, OP_MIX, OP_SCALE, OP_SQRT, TAB_N,
+                    Bitmap, Checkerboard, Composite, ConstantSpectrum, MeshAttribute)
 
 # Type name -> loading function ``fn(loader, props, form, emitter, unbounded) -> slot``
 # (``mix`` is also a BSDF type: the scene loader tells them apart).
@@ -47,7 +47,7 @@ def load_spectrum(loader, value, path: str, emitter: bool, unbounded=False, vali
                   scalar: bool = False) -> int:
     """The texture slot of a spectrum-valued parameter ``value`` at key path ``path``: a
     float, or a dict ``{'type': 'rgb'|'spectrum'|'blackbody'|'d65'|'uniform'|
-    'checkerboard'|'bitmap'|'scale'|'mix'|'mesh_attribute'|'ref', ...}`` as in Mitsuba
+    'checkerboard'|'bitmap'|'scale'|'mix'|'sqrt'|'mesh_attribute'|'ref', ...}`` as in Mitsuba
     dicts. ``emitter``: the illuminant form; ``unbounded``: RGB values may exceed 1 (True:
     pbrt-v4's unbounded upsampling; ``"mitsuba"``: a parameter Mitsuba reads as an unbounded
     texture, whose ``rgb`` values it clamps to [0, 1], unless the ``rgb`` dict asks for
@@ -141,7 +141,7 @@ def table_from_pairs(wl: np.ndarray, vals: np.ndarray, where: str) -> np.ndarray
 
 
 # Loading functions that take ``scalar`` (the others ignore it: constants and bitmaps).
-_SCALAR_AWARE = ("checkerboard", "scale", "mix")
+_SCALAR_AWARE = ("checkerboard", "scale", "mix", "sqrt")
 
 
 # ---------------------------------------------------------------- constant spectra
@@ -619,6 +619,27 @@ def _mix(loader, p, form, emitter, unbounded, scalar=False):
     m = load_spectrum(loader, p.raw("amount", 0.5), p.key("amount"), emitter=False, valid=UNIT)
     p.finish()
     return loader.textures.add(Composite(p.path, OP_MIX, x, y, m))
+
+
+@TEXTURE_TYPES.register("sqrt")
+def _sqrt(loader, p, form, emitter, unbounded, scalar=False):
+    """``sqrt`` (pbr's): the square root of a texture's value, sqrt(max(tex, 0)), taken
+    where the texture is evaluated. The pbrt-v4 reader wraps a roughness texture in it
+    when ``remaproughness`` is true (pbrt-v4's TrowbridgeReitzDistribution::
+    RoughnessToAlpha, alpha = sqrt(roughness), applied to the texture's value at each
+    lookup), so that ``roughconductor``/``roughdielectric`` get alpha.
+
+    ====  =======  =======  =====================
+    name  type     default  meaning
+    ====  =======  =======  =====================
+    tex   texture  -        the texture (required)
+    ====  =======  =======  =====================
+    """
+    if not p.has("tex"):
+        raise p.error("tex", "sqrt needs a texture 'tex'")
+    x = load_spectrum(loader, p.raw("tex"), p.key("tex"), emitter, unbounded, scalar=scalar)
+    p.finish()
+    return loader.textures.add(Composite(p.path, OP_SQRT, x))
 
 
 @TEXTURE_TYPES.register("bitmap")

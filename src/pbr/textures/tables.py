@@ -42,7 +42,7 @@ class BitmapTable:
 
 @dataclass
 class CompositeTable:
-    op: object = None           # OP_SCALE / OP_MIX / OP_CHECKER
+    op: object = None           # OP_SCALE / OP_MIX / OP_CHECKER / OP_SQRT
     x: object = None            # child slots
     y: object = None
     m: object = None

@@ -28,7 +28,7 @@ from .. import dispatch
 from .. import spectrum as spec
 from . import meshattr, mipmap, procedural
 from .kinds import (BASE_SIGMOID, BASE_TABLE, BITMAP, CHECKERBOARD, COMPOSITE, CONSTANT, MESH_ATTRIBUTE, MIPMAP,
-                    OP_CHECKER, OP_MIX, OP_SCALE, PROCEDURAL, TAB_N, Bitmap, Checkerboard, Composite,
+                    OP_CHECKER, OP_MIX, OP_SCALE, OP_SQRT, PROCEDURAL, TAB_N, Bitmap, Checkerboard, Composite,
                     ConstantSpectrum, MeshAttribute)
 from .tables import BitmapTable, CheckerTable, CompositeTable, ConstantTable, TextureTables
 
@@ -125,6 +125,8 @@ class TextureSet:
             if t.op == OP_MIX:
                 m = self.constant_value(t.m)
                 return (1.0 - m) * x + m * self.constant_value(t.y)
+            if t.op == OP_SQRT:
+                return float(np.sqrt(max(x, 0.0)))
             return 0.5 * (x + self.constant_value(t.y))
         if isinstance(t, MeshAttribute):   # data unknown at load time: a mid-range guess
             return 0.5 * float(t.params["scale"][0])
@@ -254,7 +256,7 @@ class TextureSet:
             cs = [self.items[s] for s in composites if self.depth_of(s) <= d]
             role = lambda r, ops: max([self.depth_of(getattr(c, r)) for c in cs if c.op in ops],  # noqa: E731
                                       default=0)
-            levels[d] = ({c.op for c in cs}, role("x", (OP_SCALE, OP_MIX, OP_CHECKER)),
+            levels[d] = ({c.op for c in cs}, role("x", (OP_SCALE, OP_MIX, OP_CHECKER, OP_SQRT)),
                          role("y", (OP_MIX, OP_CHECKER)), role("m", (OP_SCALE, OP_MIX)))
         bases = {c.base for c in consts}
         f = SimpleNamespace(
@@ -457,6 +459,8 @@ class TextureSet:
             result = dr.select(comp & (op == OP_SCALE), x * m, result)
         if OP_MIX in ops:
             result = dr.select(comp & (op == OP_MIX), dr.fma(m, y - x, x), result)
+        if OP_SQRT in ops:
+            result = dr.select(comp & (op == OP_SQRT), dr.sqrt(dr.maximum(x, 0.0)), result)
         if OP_CHECKER in ops:
             is_ck = comp & (op == OP_CHECKER)
             st = self._apply_uv(T.to_uv, uv, ni)
