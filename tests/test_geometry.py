@@ -80,9 +80,9 @@ def optix_like(monkeypatch, scene):
     monkeypatch.setattr(scene.geometry, "mi_scene", OptixLikeScene(scene.geometry.mi_scene))
 
 
-def _old_intersect(self, ray, active, attached=False, ray_ad=None):
+def _old_intersect(self, ray, active, attached=False, ray_ad=None, coherent=False):
     """The route pbr took before: ``shape_index`` (filled in by Embree only); the
-    derivative arguments of ``Geometry.intersect`` are accepted and unused."""
+    derivative and coherence arguments of ``Geometry.intersect`` are accepted and unused."""
     pi = self.mi_scene.ray_intersect_preliminary(ray, False, active)
     return pi.compute_surface_interaction(ray, mi.RayFlags.All, active), pi.shape_index
 

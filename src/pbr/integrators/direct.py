@@ -33,7 +33,7 @@ def intersect_camera_ray(scene, ray, active, hide_emitters: bool):
     """(si, shape) of the first surface a camera ray sees; with ``hide_emitters`` the ray
     passes through emitting surfaces (Mitsuba's ``hide_emitters``)."""
     geo, lights = scene.geometry, scene.lights
-    si, shape = geo.intersect(ray, active)
+    si, shape = geo.intersect(ray, active, coherent=True)
     if hide_emitters:
         skip = active & si.is_valid() & (lights.light_of_hit(scene, shape, si, active) > 0)
         while dr.hint(skip, label="skip_emitters"):

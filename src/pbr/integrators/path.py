@@ -111,6 +111,7 @@ class PathIntegrator(SamplingIntegrator):
         max_depth = depth_limit(self.max_depth)
 
         ray, active, L, beta, depth, valid = path_state(ray, active, None if primal else L_in)
+        from_camera = depth0 is None
         if depth0 is not None:
             depth = mi.UInt32(depth0)
         else:
@@ -145,7 +146,9 @@ class PathIntegrator(SamplingIntegrator):
             if dr.hint(ray_ad is not None, mode="scalar"):
                 with dr.resume_grad():
                     r_ad = dr.select(depth == 0, ray_ad, ray)
-            si, shape = geo.intersect(ray, active, attached=not primal, ray_ad=r_ad)
+            # Camera rays (depth 0 of a path from the camera) are traced as coherent.
+            si, shape = geo.intersect(ray, active, attached=not primal, ray_ad=r_ad,
+                                      coherent=(depth == 0) if from_camera else False)
             hit = active & si.is_valid()
             if dr.hint(self.face_first_hit, mode="scalar"):
                 si = face_the_ray(si, ray, hit & (depth == depth0))

@@ -220,7 +220,7 @@ class PRBVolPathIntegrator(_MediumAware):
             rng.set_loop_state(rng_state)
             dL_fwd, medium, n_null, terminated = cond.values(cond_state)
             # Replays differentiate the hit w.r.t. the geometry (it moves along the ray).
-            si, shape = geo.intersect(ray, active, attached=not primal)
+            si, shape = geo.intersect(ray, active, attached=not primal, coherent=depth == 0)  # camera rays
             hit = si.is_valid()
             t_hit = dr.select(hit, si.t, dr.inf)
 

@@ -116,7 +116,7 @@ class SimplePathIntegrator(SamplingIntegrator):
         while dr.hint(active, label="simplepath", exclude=[ray, ray_fixed, rng, wl, uniform_kind]):
             ray = loop_ray(ray_var, ray_fixed)
             rng.set_loop_state(rng_state)
-            si, shape = geo.intersect(ray, active)
+            si, shape = geo.intersect(ray, active, coherent=depth == 0)   # camera rays: coherent
             hit = active & si.is_valid()
             valid |= hit
             # Emission is counted where light sampling could not have found it.

@@ -291,7 +291,8 @@ class VolPathIntegrator(_MediumAware):
         while dr.hint(active, label="volpath", exclude=[rng, wl, cond]):
             rng.set_loop_state(rng_state)
             r_u, n_null, medium = cond.values(cond_state)
-            si, shape = geo.intersect(ray, active)
+            # camera rays (before the first scattering) are traced as coherent
+            si, shape = geo.intersect(ray, active, coherent=depth == 0)
             hit = si.is_valid()
             t_hit = dr.select(hit, si.t, dr.inf)
 
