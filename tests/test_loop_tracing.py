@@ -41,6 +41,35 @@ def _body_traces(monkeypatch, label, fn):
     return traces
 
 
+def _fog() -> dict:
+    """A fog sphere (a scene with a medium), a fresh dict each time."""
+    return {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": 0.3, "bsdf": {"type": "null"},
+            "interior": {"type": "homogeneous", "sigma_t": 2.0, "albedo": 0.8}}
+
+
+def _derivative_traces(monkeypatch, scene, label):
+    """Assert that loop ``label`` is traced once per loop in forward mode (a primal and a
+    forward replay) and in reverse mode (a primal and a backward replay), differentiating
+    the red wall's reflectance."""
+    for mode in ("forward", "backward"):
+        params = pbr.traverse(scene)
+        key = "red.reflectance.value"
+        dr.enable_grad(params[key])
+        params.update()
+
+        def run():
+            img = pbr.render(scene, params, seed=1)
+            if mode == "forward":
+                dr.forward(params[key])
+                np.asarray(dr.grad(img))
+            else:
+                dr.backward(dr.mean(img, axis=None))
+                np.asarray(dr.grad(params[key]))
+        traces = _body_traces(monkeypatch, label, run)
+        assert len(traces) >= 2 and set(traces) == {1}, (mode, traces)
+        monkeypatch.undo()
+
+
 def _cornell(**changes):
     d = pbr.cornell_box(8, 1)
     d.update(changes)
@@ -76,24 +105,7 @@ def test_path_loop_traced_once_with_refraction_and_dispersion(monkeypatch):
 def test_path_loops_of_derivatives_traced_once(monkeypatch):
     """Forward mode: a primal and a forward replay; reverse mode: a primal and a
     backward replay per render_backward (and the primal image): each loop traced once."""
-    for mode in ("forward", "backward"):
-        scene = pbr.load_dict(_cornell(integrator={"type": "prb", "max_depth": 4}))
-        params = pbr.traverse(scene)
-        key = "red.reflectance.value"
-        dr.enable_grad(params[key])
-        params.update()
-
-        def run():
-            img = pbr.render(scene, params, seed=1)
-            if mode == "forward":
-                dr.forward(params[key])
-                np.asarray(dr.grad(img))
-            else:
-                dr.backward(dr.mean(img, axis=None))
-                np.asarray(dr.grad(params[key]))
-        traces = _body_traces(monkeypatch, "path", run)
-        assert len(traces) >= 2 and set(traces) == {1}, (mode, traces)
-        monkeypatch.undo()
+    _derivative_traces(monkeypatch, pbr.load_dict(_cornell(integrator={"type": "prb", "max_depth": 4})), "path")
 
 
 @pytest.mark.parametrize("integrator", ["volpath", "simplevolpath"])
@@ -101,8 +113,7 @@ def test_volpath_loops_traced_once(monkeypatch, integrator):
     """On a scene with a medium (without media, the medium index, and volpath's spectral
     MIS ratio r_u, stay constant, and the loop is still traced twice)."""
     d = _cornell(integrator={"type": integrator, "max_depth": 5})
-    d["fog"] = {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": 0.3, "bsdf": {"type": "null"},
-                "interior": {"type": "homogeneous", "sigma_t": 2.0, "albedo": 0.8}}
+    d["fog"] = _fog()
     scene = pbr.load_dict(d)
     assert _body_traces(monkeypatch, integrator, lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
 
@@ -167,28 +178,11 @@ def test_prbvolpath_loops_traced_once(monkeypatch, fog):
     state only where they change."""
     d = _cornell(integrator={"type": "prbvolpath", "max_depth": 4})
     if fog:
-        d["fog"] = {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": 0.3, "bsdf": {"type": "null"},
-                    "interior": {"type": "homogeneous", "sigma_t": 2.0, "albedo": 0.8}}
+        d["fog"] = _fog()
     scene = pbr.load_dict(d)
     assert _body_traces(monkeypatch, "prbvolpath", lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
     monkeypatch.undo()
-    for mode in ("forward", "backward"):
-        params = pbr.traverse(scene)
-        key = "red.reflectance.value"
-        dr.enable_grad(params[key])
-        params.update()
-
-        def run():
-            img = pbr.render(scene, params, seed=1)
-            if mode == "forward":
-                dr.forward(params[key])
-                np.asarray(dr.grad(img))
-            else:
-                dr.backward(dr.mean(img, axis=None))
-                np.asarray(dr.grad(params[key]))
-        traces = _body_traces(monkeypatch, "prbvolpath", run)
-        assert len(traces) >= 2 and set(traces) == {1}, (mode, traces)
-        monkeypatch.undo()
+    _derivative_traces(monkeypatch, scene, "prbvolpath")
 
 
 @pytest.mark.parametrize("integrator", ["path", "volpath"])
@@ -199,7 +193,6 @@ def test_regularizing_loops_traced_once(monkeypatch, integrator):
     d = pbr.scenes.glass_caustic(8, 1)
     d["integrator"] = {"type": integrator, "max_depth": 6, "regularize": True}
     if integrator == "volpath":
-        d["fog"] = {"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": 0.3, "bsdf": {"type": "null"},
-                    "interior": {"type": "homogeneous", "sigma_t": 2.0, "albedo": 0.8}}
+        d["fog"] = _fog()
     scene = pbr.load_dict(d)
     assert _body_traces(monkeypatch, integrator, lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
