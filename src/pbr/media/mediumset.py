@@ -288,10 +288,7 @@ class MediumSet:
         scale    float     1        factor on the coefficients
         =======  ========  =======  =========================================================
         """
-        m.form = AS
-        m.s1 = self._spectrum(loader, props, "sigma_a", 1.0)
-        m.s2 = self._spectrum(loader, props, "sigma_s", 1.0)
-        m.scale = props.float("scale", 1.0, min=0.0)
+        self._pbrt_coefficients(loader, props, m)
         dens = as_grid(props.raw("density"), props.key("density")) if props.has("density") else None
         if dens is None or dens.shape[3] != 1:
             raise props.error("density", "expected a (nz, ny, nx) density grid")
@@ -344,15 +341,20 @@ class MediumSet:
         """
         if props.has("Le"):
             raise props.error("Le", "a cloud medium does not emit (pbrt-v4's CloudMedium)")
-        m.form = AS
-        m.s1 = self._spectrum(loader, props, "sigma_a", 1.0)
-        m.s2 = self._spectrum(loader, props, "sigma_s", 1.0)
-        m.scale = props.float("scale", 1.0, min=0.0)
+        self._pbrt_coefficients(loader, props, m)
         self._bounds(props, m)
         p0 = props.vector3("p0", (0.0, 0.0, 0.0))
         p1 = props.vector3("p1", (1.0, 1.0, 1.0))
         m.cloud = (props.float("density", 1.0, min=0.0), props.float("wispiness", 1.0, min=0.0),
                    props.float("frequency", 5.0), p0, p1)
+
+    def _pbrt_coefficients(self, loader, props, m):
+        """pbrt-v4's density-scaled coefficients of its grid media (``uniformgrid``,
+        ``cloud``, ``nanovdb``): ``sigma_a`` and ``sigma_s`` (1 by default) times ``scale``."""
+        m.form = AS
+        m.s1 = self._spectrum(loader, props, "sigma_a", 1.0)
+        m.s2 = self._spectrum(loader, props, "sigma_s", 1.0)
+        m.scale = props.float("scale", 1.0, min=0.0)
 
     def _nanovdb(self, loader, props, m):
         """``nanovdb`` (pbrt-v4's ``NanoVDBMedium``): sigma_a and sigma_s times the density
@@ -381,10 +383,7 @@ class MediumSet:
         from .nanovdb import dense_samples, read_nvdb
         if props.has("Le"):
             raise props.error("Le", "a nanovdb medium emits from its temperature grid, not Le (pbrt-v4's)")
-        m.form = AS
-        m.s1 = self._spectrum(loader, props, "sigma_a", 1.0)
-        m.s2 = self._spectrum(loader, props, "sigma_s", 1.0)
-        m.scale = props.float("scale", 1.0, min=0.0)
+        self._pbrt_coefficients(loader, props, m)
         if not props.has("filename"):
             raise props.error("filename", "a nanovdb medium needs the .nvdb file's 'filename'")
         where = props.key("filename")
