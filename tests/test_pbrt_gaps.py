@@ -340,13 +340,19 @@ def test_image_area_light(tmp_path):
 
 # -- material displacement (bump mapping), textures bilerp and directionmix --------------------
 
-QUAD = """
-LookAt 0 0 3  0 0 0  0 1 0
+def perspective_head(z: float) -> str:
+    """A 16 x 16, 4 spp perspective view (fov 40) from (0, 0, z) at the origin, up to
+    WorldBegin."""
+    return f"""
+LookAt 0 0 {z}  0 0 0  0 1 0
 Camera "perspective" "float fov" 40
 Film "rgb" "integer xresolution" 16 "integer yresolution" 16
 Sampler "independent" "integer pixelsamples" 4
 WorldBegin
-{world}
+"""
+
+
+QUAD = perspective_head(3) + """{world}
 Shape "trianglemesh" "point3 P" [-1 -1 0  1 -1 0  1 1 0  -1 1 0] "integer indices" [0 1 2  0 2 3]
     "point2 uv" [0 0  1 0  1 1  0 1]
 """
@@ -456,13 +462,7 @@ def test_medium_preset_errors_and_grids(tmp_path):
 
 # -- forms of pbrt-v4's syntax found in pbrt-v4-scenes (benchmarks/pbrt_scenes.py) ---------------
 
-GAP_HEAD = """
-LookAt 0 0 5  0 0 0  0 1 0
-Camera "perspective" "float fov" 40
-Film "rgb" "integer xresolution" 16 "integer yresolution" 16
-Sampler "independent" "integer pixelsamples" 4
-WorldBegin
-"""
+GAP_HEAD = perspective_head(5)
 
 
 def test_repeated_parameter_last_one_wins(tmp_path):
