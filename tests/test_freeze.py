@@ -1,6 +1,7 @@
 """``pbr.freeze``: a whole optimisation step (update, render, backward, Adam) recorded
 once and replayed, and the values-only parameter update it relies on."""
 
+import gc
 import os
 import sys
 
@@ -60,6 +61,9 @@ def step(scene, opt, ref, seed, bounds):
 
 def _optimise(case, frozen: bool, n=6):
     scene, opt, ref, bounds = _setup(case)
+    # Garbage of earlier renders (scenes) released between two frozen calls would change
+    # dr.freeze's inputs (every live Mitsuba shape) and add a recording: release it first.
+    gc.collect()
     f = pbr.freeze(step) if frozen else step
     losses = [float(f(scene, opt, ref, dr.opaque(mi.UInt32, i + 1), bounds).array[0]) for i in range(n)]
     values = np.concatenate([np.ravel(opt[k]) for k in sorted(bounds)])
