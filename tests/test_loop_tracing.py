@@ -1,5 +1,5 @@
 """The path tracers' symbolic loops (path, volpath, simplevolpath, simplepath, randomwalk,
-ptracer) are traced once per render.
+ptracer, direct, whitted, prbvolpath, bdpt) are traced once per render.
 
 Dr.Jit traces a loop body a second time when the loop state holds variables the body
 leaves unchanged (to drop them), which doubled the Python tracing of every render, its
@@ -196,3 +196,51 @@ def test_regularizing_loops_traced_once(monkeypatch, integrator):
         d["fog"] = _fog()
     scene = pbr.load_dict(d)
     assert _body_traces(monkeypatch, integrator, lambda: np.asarray(pbr.render(scene, seed=1))) == [1]
+
+
+BDPT_LOOPS = ("bdpt_light", "bdpt_camera", "bdpt_connect")
+
+
+def _bdpt_scene(kind: str) -> dict:
+    """bdpt on a diffuse Cornell box (its samples' delta flags are literals), with a
+    sobol sampler, on a glass sphere (refraction; with dispersion, the subpaths carry
+    ``term``), and with a point light and a constant environment (delta and infinite
+    lights) instead of the area light."""
+    if kind.startswith("caustic"):
+        d = pbr.scenes.glass_caustic(8, 1)
+        if kind == "caustic-dispersive":
+            d["glass"]["bsdf"] = {"type": "dielectric", "int_ior": "glass-BK7"}
+        d["integrator"] = {"type": "bdpt", "max_depth": 6}
+        return d
+    d = _cornell(integrator={"type": "bdpt", "max_depth": 5})
+    if kind == "cornell-sobol":
+        d["sensor"]["sampler"] = {"type": "sobol", "sample_count": 4}
+    if kind == "lights":
+        del d["light"], d["back"], d["ceiling"]
+        d["pt"] = {"type": "point", "position": [0.3, 0.5, 0.4], "intensity": {"type": "rgb", "value": [2.0, 2.0, 2.0]}}
+        d["sky"] = {"type": "constant", "radiance": {"type": "rgb", "value": [0.5, 0.6, 0.8]}}
+    return d
+
+
+@pytest.mark.parametrize("kind", ["cornell", "cornell-sobol", "caustic", "caustic-dispersive", "lights"])
+def test_bdpt_loops_traced_once(monkeypatch, kind):
+    """bdpt's light subpath, camera subpath and connection loops: the ray's constant
+    parts, the streams' constants, the wavelengths, the vertex store (a scatter target)
+    and what the connections read stay out of the loop state; the first vertex's delta
+    flag is opaque (Dr.Jit drops a literal the body leaves the same)."""
+    scene = pbr.load_dict(_bdpt_scene(kind))
+    for label in BDPT_LOOPS:
+        traces = _body_traces(monkeypatch, label, lambda: np.asarray(pbr.render(scene, seed=1)))
+        assert traces == [1], (label, traces)
+        monkeypatch.undo()
+
+
+def test_mlt_bdpt_loops_traced_once(monkeypatch):
+    """mlt runs bdpt's loops on its primary sample streams (one strategy per lane); a
+    fresh scene for each loop, as mlt records its kernels for the next render."""
+    for label in BDPT_LOOPS:
+        scene = pbr.load_dict(_cornell(integrator={"type": "mlt", "maxdepth": 3, "mutationsperpixel": 4,
+                                                   "bootstrapsamples": 256, "chains": 16}))
+        traces = _body_traces(monkeypatch, label, lambda: np.asarray(pbr.render(scene, seed=1)))
+        assert traces and set(traces) == {1}, (label, traces)
+        monkeypatch.undo()

@@ -14,7 +14,7 @@ from ..bsdfs.base import ShadingContext
 from ..lights.directional import DirectionalLight
 from ..lights.directionalarea import DirectionalAreaLight
 from ..spectrum import first_only
-from .base import INTEGRATORS
+from .base import INTEGRATORS, loop_ray, ray_state
 from .lightpath import (LightTracingIntegrator, connect_to_camera, eval_importance, lens_sample,
                         sample_importance, shading_correction, start_light_path)
 
@@ -133,6 +133,13 @@ def reverse_pdf(bsdfs, bsdf_id, ctx, wi_local, wo_local, active):
     si = mi.SurfaceInteraction3f(ctx.si)
     si.wi = wi_local
     return bsdfs.eval_pdf(bsdf_id, ShadingContext(si, ctx.wl), wo_local, active)[1]
+
+
+def delta_flag() -> mi.Bool:
+    """The delta flag of a subpath's first vertex (False) as loop state: opaque, since
+    Dr.Jit drops a state variable that starts and ends the body as the same literal (the
+    samples' flag in a scene without delta lobes) and then traces the body again."""
+    return dr.opaque(mi.Bool, False)
 
 
 def light_kinds(lights) -> mi.UInt32:
@@ -274,15 +281,25 @@ class BDPTIntegrator(LightTracingIntegrator):
         prev_n = mi.Normal3f(n0)
         prev_fwd = mi.Float(fwd0)
         prev_E = mi.Float(E0)
-        prev_delta = mi.Bool(False)
-        prev_inf = mi.Bool(inf0)
+        prev_delta = delta_flag()
         pdf_dir = mi.Float(les.pdf_dir)       # solid-angle density of the ray leaving y_{k-1}
         pdf_pos0 = mi.Float(les.pdf_pos)
-        term = mi.Bool(False)
         beta = mi.Spectrum(beta)
         k = mi.UInt32(1)
         active = mi.Bool(ok)
-        while dr.hint(active, label="bdpt_light"):
+        # The loop state holds only what a vertex changes (see path's loop): the ray's
+        # time and wavelengths, the stream's constants, the wavelengths, the lane index,
+        # y_0's densities and the store (scattered to) stay outside it, and the dispersion
+        # flag is state only with dispersion. Python ifs are plain ifs (mode="scalar"),
+        # so that the excluded variables they read stay outside.
+        dispersive = bsdfs.dispersive
+        term = mi.Bool(False) if dispersive else None
+        ray_var, ray_fixed = ray_state(ray, extent=False)   # spawned rays: the largest extent
+        rng_state = rng.loop_state()
+        while dr.hint(active, label="bdpt_light", exclude=[ray, ray_fixed, rng, wl, lane, pdf_pos0, inf0, store]):
+            ray = loop_ray(ray_var, ray_fixed)
+            rng.set_loop_state(rng_state)
+            prev_inf = inf0 & (k == 1)      # y_{k-1} is y_0 of an infinite light
             si, shape = geo.intersect(ray, active)
             hit = active & si.is_valid()
             cos_k = dr.abs(dr.dot(si.n, ray.d))
@@ -302,7 +319,7 @@ class BDPTIntegrator(LightTracingIntegrator):
             rev_km1 = to_area(reverse_pdf(bsdfs, bsdf_id, ctx, wi_cam, si.wi, vis), si.p, prev_p, prev_n, prev_inf)
             w = mis_weight(0.0, side_sum(rev_k, fwd, rev_km1, prev_fwd, prev_delta, prev_E))
             Lc = Lc * strategies.weight(k + 1, 1, w)
-            if bsdfs.dispersive:
+            if dr.hint(dispersive, mode="scalar"):
                 Lc[term] = first_only(Lc)
             splat(pos, Lc, wl, vis)
 
@@ -317,23 +334,26 @@ class BDPTIntegrator(LightTracingIntegrator):
                               si.p, prev_p, prev_n, prev_inf)
             rev_km1 = dr.select(bs.delta, 0.0, rev_km1)
             E = advance_sum(prev_E, rev_km1, prev_fwd, bs.delta, prev_delta)
-            flags = dr.select(bs.delta & go, mi.UInt32(DELTA), 0) | dr.select(term, mi.UInt32(TERMINATED), 0)
+            flags = dr.select(bs.delta & go, mi.UInt32(DELTA), 0)
+            if dr.hint(dispersive, mode="scalar"):
+                flags |= dr.select(term, mi.UInt32(TERMINATED), 0)
             dr.scatter(store, LightVertex(ray.o, ray.d, si.p, si.n, beta, fwd, E, flags), k * n + lane, hit)
             n_light[hit] = k + 1
 
             beta *= bs.weight * corr
-            if bsdfs.dispersive:
+            if dr.hint(dispersive, mode="scalar"):
                 term |= go & bs.terminate
             prev_p = mi.Point3f(si.p)
             prev_n = mi.Normal3f(si.n)
             prev_fwd = mi.Float(fwd)
             prev_E = mi.Float(E)
             prev_delta = mi.Bool(bs.delta)
-            prev_inf = mi.Bool(False)
             pdf_dir = dr.select(bs.delta, 0.0, bs.pdf)
-            ray = si.spawn_ray(wo)
+            ray_var = ray_state(si.spawn_ray(wo), extent=False)[0]
             k += 1
             active = go & (bs.pdf > 0) & side_ok & (dr.max(beta) > 0)
+            rng_state = rng.loop_state()
+        rng.set_loop_state(rng_state)
 
     # -- camera subpaths (s = 0, s = 1 and s, t >= 2) ------------------------------------
     @dr.syntax
@@ -353,16 +373,22 @@ class BDPTIntegrator(LightTracingIntegrator):
         prev_n = mi.Normal3f(0.0)
         prev_fwd = mi.Float(1.0)
         prev_E = mi.Float(0.0)
-        prev_delta = mi.Bool(False)
+        prev_delta = delta_flag()
         pdf_dir = mi.Float(cam.pdf_We(ray)[1])
         L = mi.Spectrum(0.0)
         beta = mi.Spectrum(1.0)
-        term = mi.Bool(False)
         valid = mi.Bool(False)
         k = mi.UInt32(1)                  # z_k is found now; its strategies have t = k + 1
         active = mi.Bool(active) & (pdf_dir > 0) & (strategies.camera_max >= 2)
-        ray = mi.Ray3f(ray)
-        while dr.hint(active, label="bdpt_camera"):
+        # Loop state: only what a vertex changes (as in the light subpaths' loop); the
+        # light kinds, lane index and light subpath lengths are read from outside.
+        dispersive = bsdfs.dispersive
+        term = mi.Bool(False) if dispersive else None
+        ray_var, ray_fixed = ray_state(ray)
+        rng_state = rng.loop_state()
+        while dr.hint(active, label="bdpt_camera", exclude=[ray, ray_fixed, rng, wl, kinds, lane, n_light]):
+            ray = loop_ray(ray_var, ray_fixed)
+            rng.set_loop_state(rng_state)
             si, shape = geo.intersect(ray, active)
             hit = active & si.is_valid()
             valid |= hit
@@ -370,7 +396,7 @@ class BDPTIntegrator(LightTracingIntegrator):
             Lk = mi.Spectrum(0.0)
 
             # s = 0: the camera subpath found an emitter.
-            if has_lights:
+            if dr.hint(has_lights, mode="scalar"):
                 light = lights.light_of_hit(scene, shape, si, hit)
                 on_light = hit & (light > 0) & strategies.wants(0, k + 1)
                 Le = lights.L(light - 1, si, wl, on_light)
@@ -379,7 +405,7 @@ class BDPTIntegrator(LightTracingIntegrator):
                 rev_km1 = to_area(pdf_e, si.p, prev_p, prev_n)
                 w = dr.select(k == 1, 1.0, mis_weight(side_sum(rev_k, fwd, rev_km1, prev_fwd, prev_delta, prev_E), 0.0))
                 Lk += dr.select(on_light, beta * Le * strategies.weight(0, k + 1, w), 0.0)
-                if lights.has_infinite:
+                if dr.hint(lights.has_infinite, mode="scalar"):
                     escaped = active & ~si.is_valid() & strategies.wants(0, k + 1)
                     Le_inf = mi.Spectrum(0.0)
                     for Le_i, _ in lights.Le_escaped(ray.d, wl, prev_p, prev_n, escaped):
@@ -413,7 +439,7 @@ class BDPTIntegrator(LightTracingIntegrator):
                 inf_l = (kind & (INFINITE_LIGHT | DELTA_DIRECTION)) != 0
                 delta_l = (kind & (DELTA_POSITION | DELTA_DIRECTION)) != 0
                 dist = dr.norm(ls.p - si.p)
-                if area_lights:
+                if dr.hint(area_lights, mode="scalar"):
                     # Trace to the light point: the hit gives the light's normals there.
                     sray = si.spawn_ray_to(ls.p)
                     sray.maxt = dist * 1.001
@@ -442,14 +468,18 @@ class BDPTIntegrator(LightTracingIntegrator):
                 w = mis_weight(side_sum(rev_k, fwd, rev_km1, prev_fwd, prev_delta, prev_E), sum_l)
                 Lk += dr.select(em, beta * f_l * ls.L * (strategies.weight(1, k + 1, w) / (ls.pdf * pmf)), 0.0)
 
-            if bsdfs.dispersive:
+            if dr.hint(dispersive, mode="scalar"):
                 Lk[term] = first_only(Lk)
             L += Lk
 
             # s >= 2, t = k + 1: connect z_k to the stored light vertices y_{s-1}.
             s, s_max = strategies.connections(k, dr.minimum(n_light, md + 1 - dr.minimum(k, md + 1)))
             inner = conn & (s <= s_max)
-            while dr.hint(inner, label="bdpt_connect"):
+            # Its state: the strategy, the mask and the radiance; the camera vertex and
+            # everything else it reads stay outside.
+            while dr.hint(inner, label="bdpt_connect",
+                          exclude=[store, lane, si, ctx, bsdf_id, fwd, beta, term, k, s_max, prev_p, prev_n,
+                                   prev_fwd, prev_delta, prev_E, wl]):
                 q = dr.gather(LightVertex, store, (s - 1) * n + lane, inner)
                 qm = dr.gather(LightVertex, store, (s - 2) * n + lane, inner)
                 si_q, shape_q = geo.intersect(mi.Ray3f(q.o, q.d), inner)
@@ -478,7 +508,7 @@ class BDPTIntegrator(LightTracingIntegrator):
                                  (qm.flags & DELTA) != 0, qm.E)
                 w = mis_weight(sum_c, sum_q)
                 Lc = q.beta * f_q * f_t * beta * (corr * strategies.weight(s, k + 1, w) / d2)
-                if bsdfs.dispersive:
+                if dr.hint(dispersive, mode="scalar"):
                     Lc[term | ((q.flags & TERMINATED) != 0)] = first_only(Lc)
                 L += dr.select(ok, Lc, 0.0)
                 s += 1
@@ -490,16 +520,18 @@ class BDPTIntegrator(LightTracingIntegrator):
             rev_km1 = dr.select(bs.delta, 0.0, rev_km1)
             prev_E = advance_sum(prev_E, rev_km1, prev_fwd, bs.delta, prev_delta)
             beta *= bs.weight
-            if bsdfs.dispersive:
+            if dr.hint(dispersive, mode="scalar"):
                 term |= go & bs.terminate
             prev_p = mi.Point3f(si.p)
             prev_n = mi.Normal3f(si.n)
             prev_fwd = mi.Float(fwd)
             prev_delta = mi.Bool(bs.delta)
             pdf_dir = dr.select(bs.delta, 0.0, bs.pdf)
-            ray = si.spawn_ray(si.to_world(bs.wo))
+            ray_var = ray_state(si.spawn_ray(si.to_world(bs.wo)))[0]
             k += 1
             active = go & (bs.pdf > 0) & (dr.max(beta) > 0)
+            rng_state = rng.loop_state()
+        rng.set_loop_state(rng_state)
 
         return L, valid
 

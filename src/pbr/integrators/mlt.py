@@ -82,6 +82,13 @@ class PrimarySampleStream(Struct):
 
     next_1d = next_float32
 
+    def loop_state(self) -> tuple:
+        """The stream's loop state (``SampleStream.loop_state``): its position."""
+        return (self.index,)
+
+    def set_loop_state(self, state: tuple) -> None:
+        self.index, = state
+
     def next_2d(self) -> mi.Point2f:
         """The next two coordinates (the sample streams' interface, which bdpt draws from)."""
         u = self.next_float32()
