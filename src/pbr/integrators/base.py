@@ -309,7 +309,11 @@ class SamplingIntegrator:
         luminance), the sums a pixel's variance is estimated from (pbr.adaptive)."""
         rng, wl, ray, weight, inside = self._camera_samples(cam, w, h, spp, per_pass, p, seed, pixels=pixels)
         ray_weight = self._ray_weight
-        out = radiance(rng, ray, wl, inside)
+        scene.textures.fix_per_sample(wl.lambda_, scene.lights.spectrum_slots)
+        try:
+            out = radiance(rng, ray, wl, inside)
+        finally:
+            scene.textures.release_per_sample()
         L, extra = out if isinstance(out, tuple) else (out, ())
         if ray_weight is not None:
             L = L * ray_weight

@@ -15,6 +15,7 @@ import mitsuba as mi
 from .. import dispatch
 from ..plugins.props import did_you_mean
 from ..plugins.tables import own_table_memory
+from ..spectrum import SampledWavelengths
 from .area import AreaLight
 from .base import LIGHT_TYPES, LightSample, LightType, LeSample
 from .lightsamplers import make_light_sampler, LightTable
@@ -55,6 +56,7 @@ class LightSet:
 
     def build(self, scene) -> None:
         self.order = list(self.families)
+        self.textures = scene.textures
         for f in self.families.values():
             f.textures = scene.textures
             f.build(scene)
@@ -75,6 +77,9 @@ class LightSet:
         self.scene_radius = float(np.linalg.norm(np.array(bbox.max) - c)) if bbox.valid() else 1.0
         self.table = table
         self._samplers = {}
+        # The texture slots of the emitted spectra (TextureSet.fix_per_sample)
+        self.spectrum_slots = sorted({int(inst[k]) for f in self.families.values() for inst in f.instances
+                                      for k in ("radiance", "slot") if isinstance(inst.get(k), (int, np.integer))})
 
     def sampler(self, kind: str):
         """The light sampler ``kind`` ('uniform', 'power' or 'bvh'; see
@@ -115,8 +120,28 @@ class LightSet:
             return getattr(fams[0], method)(local, *args, active)
         fam = dr.gather(mi.UInt32, self.family_of, light, active)
         tracing = [k for k, f in enumerate(fams) if method in f.traces_rays_in]
-        return dispatch.switch(fam, [_typed(getattr(f, method)) for f in fams], local, *args, active,
-                               outside=tracing)
+        return self._switch(fam, [_typed(getattr(f, method)) for f in fams], local, args, active, tracing)
+
+    def _switch(self, fam, fns, local, args, active, outside=()):
+        """``dispatch.switch`` over the families. The emitter spectra the texture set fixed
+        for the wavelengths among ``args`` (TextureSet.fix_per_sample) go along as
+        arguments: a symbolic call passes its arguments as new variables and cannot read
+        arrays of the caller's other than through them."""
+        at = next((i for i, a in enumerate(args) if isinstance(a, SampledWavelengths)), None)
+        fixed = self.textures.fixed_for(args[at].lambda_) if at is not None else None
+        if fixed is None:
+            return dispatch.switch(fam, fns, local, *args, active, outside=outside)
+        slots = sorted(fixed)
+
+        def forwarding(fn):
+            def call(local, *rest):
+                *a, values, on = rest
+                with self.textures.fixed_as(a[at].lambda_, dict(zip(slots, values))):
+                    return fn(local, *a, on)
+            return call
+
+        return dispatch.switch(fam, [forwarding(fn) for fn in fns], local, *args, [fixed[k] for k in slots], active,
+                               outside=outside)
 
     # -- used by integrators -----------------------------------------------------------
     def L(self, light, si, wl, active):
@@ -196,7 +221,7 @@ class LightSet:
             s = fams[0].sample_Le(local, u_pos, u_dir, wl, active)
         else:
             fam = dr.gather(mi.UInt32, self.family_of, light, active)
-            s = dispatch.switch(fam, [_typed_Le(f.sample_Le) for f in fams], local, u_pos, u_dir, wl, active)
+            s = self._switch(fam, [_typed_Le(f.sample_Le) for f in fams], local, (u_pos, u_dir, wl), active)
         s = _cast_Le(s)
         ok = active & (s.pdf_pos > 0) & (s.pdf_dir > 0) & (pmf > 0)
         cos = dr.select(s.delta_pos, 1.0, dr.abs(dr.dot(s.n, s.d)))

@@ -18,6 +18,7 @@ metals for every diffuse albedo).
 
 from __future__ import annotations
 
+import contextlib
 from types import SimpleNamespace
 
 import drjit as dr
@@ -54,6 +55,7 @@ class TextureSet:
         self.mesh_geometry: dict = {}
         self.tables = TextureTables()
         self._features: dict = {}       # reach -> what its evaluation must trace
+        self._fixed = None              # emitter spectra of a pass's wavelengths (fix_per_sample)
 
     # -- building -------------------------------------------------------------------
     def add(self, tex) -> int:
@@ -420,6 +422,59 @@ class TextureSet:
         # Chain rule through to_uv (st = A uv + b).
         return v, A[0] * gs + A[3] * gt, A[1] * gs + A[4] * gt
 
+    # Most constant emitter spectra fixed per camera sample (more would cost more per
+    # sample than their lookups per vertex save).
+    MAX_FIXED = 4
+
+    def fix_per_sample(self, lam: mi.Spectrum, slots) -> None:
+        """Evaluate the constant illuminant textures among ``slots`` (the lights' emitted
+        spectra) at a pass's wavelengths ``lam`` once, before the integrator's loop: they
+        depend on the wavelengths only, which a path keeps at every vertex, and a light's
+        spectrum is looked up at each bounce (emission found and next-event estimation),
+        each time a gather and a sigmoid per wavelength. :meth:`eval` returns them for
+        these wavelengths until :meth:`release_per_sample`. Not where the constants carry
+        derivatives (the derivative passes evaluate them attached, inside the loop)."""
+        self._fixed = None
+        slots = sorted(s for s in set(slots) if self.kind_of(s) == CONSTANT)
+        # (the AD index: under dr.suspend_grad, where passes are traced, grad_enabled is False)
+        if not slots or len(slots) > self.MAX_FIXED or self.tables.constants.packed.index_ad != 0:
+            return
+        vals = {s: self._eval_leaf(mi.UInt32(s), mi.Point2f(0.0), lam, mi.Bool(True), True, None,
+                                   self.features((s,))) for s in slots}
+        self._fixed = (lam, tuple(c.index for c in lam), vals)
+
+    def release_per_sample(self) -> None:
+        self._fixed = None
+
+    def fixed_for(self, lam) -> dict | None:
+        """slot -> the spectrum fixed for it at wavelengths ``lam``, or None."""
+        fixed = self._fixed
+        return fixed[2] if fixed is not None and fixed[1] == tuple(c.index for c in lam) else None
+
+    @contextlib.contextmanager
+    def fixed_as(self, lam, values: dict):
+        """Within the block, ``values`` (slot -> spectrum) are the spectra fixed at ``lam``:
+        the same spectra passed into a symbolic call (``LightSet``'s dispatch), where the
+        wavelengths and the values are the call's own variables."""
+        prev = self._fixed
+        self._fixed = (lam, tuple(c.index for c in lam), values)
+        try:
+            yield
+        finally:
+            self._fixed = prev
+
+    def _fixed_value(self, slot, lam, reach):
+        """The value :meth:`fix_per_sample` fixed for ``slot`` (one of ``reach``) at
+        wavelengths ``lam``, or None."""
+        vals = self.fixed_for(lam) if reach else None
+        if vals is None or not all(int(r) in vals for r in reach):
+            return None
+        reach = sorted(int(r) for r in reach)
+        v = vals[reach[-1]]
+        for r in reach[-2::-1]:
+            v = dr.select(slot == r, vals[r], v)
+        return mi.Spectrum(v)
+
     def eval(self, slot, uv, lam: mi.Spectrum, active=True, illuminant=True, reach=None) -> mi.Spectrum:
         """Spectrum of texture ``slot`` at ``uv``: surface coordinates, or the surface
         interaction (BSDFs pass ``ctx.si``: ``mesh_attribute`` textures need the hit; they
@@ -428,6 +483,10 @@ class TextureSet:
         ``reach``: the slots ``slot`` can hold (Python ints), or None for any: only what
         those slots use is traced (:meth:`features`)."""
         slot = mi.UInt32(slot)
+        if illuminant and self._fixed is not None:
+            v = self._fixed_value(slot, lam, reach)
+            if v is not None:
+                return v
         si = uv if isinstance(uv, mi.SurfaceInteraction3f) else None
         uv = si.uv if si is not None else uv
         f = self.features(reach)
