@@ -177,17 +177,21 @@ def light_frame(props, allow_position: bool = False) -> np.ndarray:
     return m
 
 
-def vec_table(rows) -> mi.Float:
-    """Per-instance 3-vectors, flattened (gather them with ``gather3``)."""
-    return mi.Float(np.asarray(rows, dtype=np.float64).reshape(-1).astype(np.float32))
+def vec_table(rows) -> mi.Vector3f:
+    """Per-instance 3-vectors, one array per component (gather them with ``gather3``).
+    A family with one instance thus has width-1 components, which Dr.Jit reads as
+    constants instead of gathering them (a flat table of 3 values took 3 gathers per
+    lookup: 18 per light sample of a projector)."""
+    a = np.asarray(rows, dtype=np.float64).reshape(-1, 3).astype(np.float32)
+    return mi.Vector3f(*[mi.Float(np.ascontiguousarray(a[:, k])) for k in range(3)])
 
 
 def gather3(tp, table, idx, active):
-    return dr.gather(tp, table, idx, active)
+    return tp(dr.gather(mi.Vector3f, table, idx, active))
 
 
 def mat_rows(mats) -> list:
-    """Three flat tables, the rows of each instance's 3x3 matrix."""
+    """Three tables (see ``vec_table``), the rows of each instance's 3x3 matrix."""
     return [vec_table([m[r] for m in mats]) for r in range(3)]
 
 
