@@ -22,6 +22,7 @@ Conventions (stated once, used everywhere):
 
 from __future__ import annotations
 
+import contextlib
 import os
 from functools import lru_cache
 
@@ -156,13 +157,31 @@ def _indices(lam) -> tuple:
     return tuple(c.index for c in lam)
 
 
+def fixed_d65(lam) -> mi.Spectrum | None:
+    """D65 at wavelengths ``lam`` if it was computed once for them (see :func:`d65`)."""
+    return _D65_MEMO[2] if _D65_MEMO and _D65_MEMO[1] == _indices(lam) else None
+
+
+@contextlib.contextmanager
+def d65_fixed_as(lam, value):
+    """Within the block, ``value`` is D65 at wavelengths ``lam``: the fixed value passed
+    into a symbolic call, whose wavelengths are the call's own variables."""
+    prev = list(_D65_MEMO)
+    _D65_MEMO[:] = [lam, _indices(lam), value]
+    try:
+        yield
+    finally:
+        _D65_MEMO[:] = prev
+
+
 def d65(lam: mi.Spectrum) -> mi.Spectrum:
     """The D65 illuminant, scaled to unit luminance. At the wavelengths a camera sample
     drew (``SampledWavelengths.sample_visible``) it is the value computed there, once per
     sample: emitters look it up at every path vertex, inside loops that would otherwise
     repeat the table lookups at each bounce."""
-    if _D65_MEMO and _D65_MEMO[1] == _indices(lam):
-        return _D65_MEMO[2]
+    fixed = fixed_d65(lam)
+    if fixed is not None:
+        return fixed
     return _per_lambda(_Tables.get()["d65"], lam)
 
 

@@ -8,6 +8,8 @@ are evaluated on rays that leave the scene.
 
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import drjit as dr
 import mitsuba as mi
@@ -15,6 +17,7 @@ import mitsuba as mi
 from .. import dispatch
 from ..plugins.props import did_you_mean
 from ..plugins.tables import own_table_memory
+from .. import spectrum as spec
 from ..spectrum import SampledWavelengths
 from .area import AreaLight
 from .base import LIGHT_TYPES, LightSample, LightType, LeSample
@@ -123,25 +126,32 @@ class LightSet:
         return self._switch(fam, [_typed(getattr(f, method)) for f in fams], local, args, active, tracing)
 
     def _switch(self, fam, fns, local, args, active, outside=()):
-        """``dispatch.switch`` over the families. The emitter spectra the texture set fixed
-        for the wavelengths among ``args`` (TextureSet.fix_per_sample) go along as
-        arguments: a symbolic call passes its arguments as new variables and cannot read
-        arrays of the caller's other than through them."""
+        """``dispatch.switch`` over the families. What was fixed once per camera sample
+        for the wavelengths among ``args`` (D65, the emitter spectra of
+        TextureSet.fix_per_sample) goes along as arguments: a symbolic call receives its
+        arguments as new variables and cannot read the caller's other arrays."""
         at = next((i for i, a in enumerate(args) if isinstance(a, SampledWavelengths)), None)
-        fixed = self.textures.fixed_for(args[at].lambda_) if at is not None else None
-        if fixed is None:
+        lam = args[at].lambda_ if at is not None else None
+        fixed = (self.textures.fixed_for(lam) or {}) if lam is not None else {}
+        d65 = spec.fixed_d65(lam) if lam is not None else None
+        if not fixed and d65 is None:
             return dispatch.switch(fam, fns, local, *args, active, outside=outside)
         slots = sorted(fixed)
 
         def forwarding(fn):
             def call(local, *rest):
-                *a, values, on = rest
-                with self.textures.fixed_as(a[at].lambda_, dict(zip(slots, values))):
+                *a, (d65_in, values), on = rest
+                lam_in = a[at].lambda_
+                with contextlib.ExitStack() as stack:
+                    if d65_in is not None:
+                        stack.enter_context(spec.d65_fixed_as(lam_in, d65_in))
+                    if values:
+                        stack.enter_context(self.textures.fixed_as(lam_in, dict(zip(slots, values))))
                     return fn(local, *a, on)
             return call
 
-        return dispatch.switch(fam, [forwarding(fn) for fn in fns], local, *args, [fixed[k] for k in slots], active,
-                               outside=outside)
+        return dispatch.switch(fam, [forwarding(fn) for fn in fns], local, *args,
+                               (d65, [fixed[k] for k in slots]), active, outside=outside)
 
     # -- used by integrators -----------------------------------------------------------
     def L(self, light, si, wl, active):
