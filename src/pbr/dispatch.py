@@ -146,7 +146,9 @@ def loop(state, cond, body, unroll: int, label: str):
     path loop that carries gradients. Dr.Jit 1.5 reverse-differentiates a symbolic loop
     only with a trajectory bound (``max_iterations``), and with one generated invalid
     LLVM IR for such loops; and its forward mode does not carry derivatives from outside
-    a nested symbolic loop into it (they came out 0)."""
+    a nested symbolic loop into it (they came out 0). Also for a loop with a short
+    known trip count, where straight-line code is cheaper than a loop (a shallow light
+    BVH's descent)."""
     if not unroll:
         return dr.while_loop(state, cond, body, label=label)
     state = tuple(state)
