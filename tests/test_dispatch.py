@@ -61,3 +61,39 @@ def test_light_family_that_traces_rays_is_called_outside_the_switch():
         b = np.asarray(pbr.render(scene, spp=16, seed=3))
     assert np.allclose(a, b, rtol=1e-4, atol=1e-6), np.abs(a - b).max()
     assert a.mean() > 1.2 * without.mean()
+
+
+def _when_any_result(mask_from):
+    import drjit as dr
+    import mitsuba as mi
+    pbr.set_backend("llvm")
+    x = dr.arange(mi.Float, 64)
+    mask = x >= mask_from
+    return x, mask, dispatch.when_any(mask, lambda: (x * 2.0, mi.UInt32(x) + 1), otherwise=(mi.Float(-1.0), mi.UInt32(7)))
+
+
+def test_when_any_skips_packets_without_a_lane():
+    """Lanes of ``mask`` get the function's value; a vector packet with none of them
+    (the first 8 lanes: packets are 8 or 16 wide on the CPU) gets ``otherwise``, which
+    shows that the code was skipped there, not computed and discarded."""
+    x, mask, (a, b) = _when_any_result(40.0)
+    x, mask, a, b = (np.asarray(v) for v in (x, mask, a, b))
+    assert np.array_equal(a[mask], 2 * x[mask]) and np.array_equal(b[mask], x[mask].astype(np.uint32) + 1)
+    assert np.all(a[:8] == -1.0) and np.all(b[:8] == 7)
+    with dispatch.whole_packets():
+        _, _, (a2, _) = _when_any_result(40.0)
+    assert np.array_equal(np.asarray(a2), 2 * x)      # computed on every packet
+
+
+def test_when_any_with_a_literal_mask():
+    """A literal False mask (a path tracer without next-event estimation) traces only
+    the skipped branch; zeros shaped like the function's result when ``otherwise`` is
+    None."""
+    import drjit as dr
+    import mitsuba as mi
+    pbr.set_backend("llvm")
+    x = dr.arange(mi.Float, 16)
+    r = dispatch.when_any(mi.Bool(False), lambda: (x + 1.0, mi.Vector3f(x, x, x)))
+    assert np.all(np.asarray(r[0]) == 0) and np.all(np.asarray(r[1]) == 0)
+    r = dispatch.when_any(mi.Bool(True), lambda: x + 1.0)
+    assert np.array_equal(np.asarray(r), np.arange(16) + 1.0)

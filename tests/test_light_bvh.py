@@ -147,6 +147,27 @@ def test_sampled_frequencies_match_pmf(kind):
             assert counts[7] == 0 and counts[11] == 0 and pmf[7] == 0 and pmf[11] == 0
 
 
+@pytest.mark.parametrize("n", [3, 9, 40])
+def test_shallow_and_deep_trees_sample_their_pmf(n):
+    """Trees of at most ``UNROLL_DEPTH`` levels are descended by straight-line code,
+    deeper ones by a loop: both sample with the frequencies of their pmf, which matches
+    the float64 walk of the tree (the 3- and 9-light trees with 2 tree lights and with 7
+    are the straight-line case; light 1 of 3 is the infinite one)."""
+    from pbr.lights import bvh
+    rng = np.random.default_rng(11)
+    items, powers = random_lights(rng)
+    items, powers = items[:n], powers[:n]
+    if n == 3:
+        items[1], powers[1] = None, 3.0
+    s = make_light_sampler("bvh", powers, items)
+    assert (s.bvh.max_depth <= bvh.UNROLL_DEPTH) == (n < 40)
+    for p, nrm in SHADING[:2]:
+        counts, failed, pmf = sample_counts(s, p, nrm, n, 1 << 18, rng)
+        np.testing.assert_allclose(pmf, s.pmf_all_np(p, nrm), rtol=2e-4, atol=1e-9)
+        pval, _ = chi2_test(np.append(counts, failed), (1 << 18) * np.append(pmf, max(0.0, 1.0 - pmf.sum())))
+        assert pval > 1e-4, (n, p, pval)
+
+
 def test_bvh_pmf_sums_to_one_where_no_light_is_ruled_out():
     """Omnidirectional / two-sided lights seen from points without a normal: every
     importance is positive, so the probabilities sum to exactly 1."""

@@ -17,6 +17,7 @@ import contextlib
 import drjit as dr
 
 _by_lane = False
+_whole_packets = False
 
 
 @contextlib.contextmanager
@@ -28,6 +29,20 @@ def by_lane():
         yield
     finally:
         _by_lane = prev
+
+
+@contextlib.contextmanager
+def whole_packets():
+    """Within the block, :func:`when_any` runs its function on every packet (no symbolic
+    conditional): for adjoint passes, which Dr.Jit 1.5 aborted (a fatal error, not an
+    exception) with these conditionals in the path loop (the gallery's parameters in
+    ``tests/test_ad_every_parameter.py``)."""
+    global _whole_packets
+    prev, _whole_packets = _whole_packets, True
+    try:
+        yield
+    finally:
+        _whole_packets = prev
 
 
 def branching() -> bool:
@@ -53,6 +68,45 @@ def switch(index, fns, *args, outside=()):
         r = fn(*rest, mine)
         out = r if out is None else _select(mine, r, out)
     return _select(active, out, None)
+
+
+def when_any(mask, fn, *args, otherwise=None, label="when any"):
+    """``fn(*args)`` where some lane of ``mask`` is set, zeros elsewhere: a symbolic
+    conditional, so that a vector packet with no such lane skips ``fn``'s code (Dr.Jit's
+    LLVM backend branches on whether any lane of a packet takes a branch), as a
+    symbolic call skips a callee that no lane of a packet calls. ``fn``'s result on
+    lanes outside ``mask`` must not matter; ``otherwise``: the result of skipped packets
+    (zeros shaped like ``fn``'s result if None). Within :func:`by_lane` and
+    :func:`whole_packets` it is plain ``fn(*args)``."""
+    if _by_lane or _whole_packets:
+        return fn(*args)
+    shape = []
+
+    def on(*a):
+        r = fn(*a)
+        shape.append(r)
+        return r
+
+    def off(*a):
+        if otherwise is not None:
+            return otherwise
+        # (a literal False mask: Dr.Jit traces this branch only; fn's code is unused)
+        return _zeros(shape[0] if shape else fn(*a))
+
+    return dr.if_stmt((), mask, lambda: on(*args), lambda: off(*args), label=label)
+
+
+def _zeros(v):
+    """Zeros shaped like the result tree ``v``."""
+    if isinstance(v, tuple):
+        return type(v)(_zeros(x) for x in v)
+    fields = getattr(type(v), "DRJIT_STRUCT", None)
+    if fields:
+        out = type(v).__new__(type(v))
+        for k in fields:
+            setattr(out, k, _zeros(getattr(v, k)))
+        return out
+    return dr.zeros(type(v), dr.width(v))
 
 
 def _switch_outside(index, fns, args, outside):
@@ -92,7 +146,9 @@ def loop(state, cond, body, unroll: int, label: str):
     path loop that carries gradients. Dr.Jit 1.5 reverse-differentiates a symbolic loop
     only with a trajectory bound (``max_iterations``), and with one generated invalid
     LLVM IR for such loops; and its forward mode does not carry derivatives from outside
-    a nested symbolic loop into it (they came out 0)."""
+    a nested symbolic loop into it (they came out 0). Also for a loop with a short
+    known trip count, where straight-line code is cheaper than a loop (a shallow light
+    BVH's descent)."""
     if not unroll:
         return dr.while_loop(state, cond, body, label=label)
     state = tuple(state)

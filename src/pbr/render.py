@@ -94,7 +94,7 @@ class _RenderOp(dr.CustomOp):
 
     def backward(self):
         counter = self.integrator.nonfinite = NonFinite(self.on_nonfinite)
-        with backend.pbr_variant(), sensor_index(self.scene, self.sensor) as i:
+        with backend.pbr_variant(), sensor_index(self.scene, self.sensor) as i, dispatch.whole_packets():
             self.integrator.render_backward(self.scene, self.grad_out(), sensor=i, seed=self.seed[1],
                                             spp=self.spp[1])
         self._report(counter, "pbr.render (adjoint pass)")

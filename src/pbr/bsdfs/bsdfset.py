@@ -200,6 +200,10 @@ class BSDFSet:
         self.component_families = [t for t in self.order if t in comp_fams]
         self.component_family_of = mi.UInt32([self.component_families.index(t) if t in comp_fams else 0
                                               for t, _, _, _ in self.entries])
+        # Which entry attributes blend components have (evaluating a component skips the others).
+        self.components_masked = any(self.entries[e][3] != NO_BACK for e in comp)
+        self.components_twosided = any(self.entries[e][2] != NO_BACK for e in comp)
+        self.components_perturbed = any(e in self.perturb_of for e in comp)
         self.mixed_delta = mi.Bool([i in self.blend_mixed_delta for i in range(n)]) if self.blend_mixed_delta else None
         pert = [self.perturb_of.get(i, (0, NO_BACK, 0.0, True, True)) for i in range(n)]
         self.pert_kind = mi.UInt32([x[0] for x in pert])
@@ -355,9 +359,9 @@ class BSDFSet:
         fam = dr.gather(mi.UInt32, family_of, bsdf_id, active)
         return dispatch.switch(fam, [_typed(getattr(f, method)) for f in fams], ctx, local, *args, active)
 
-    def _side(self, bsdf_id, ctx, active):
+    def _side(self, bsdf_id, ctx, active, components=False):
         """(entry to use, context, flip mask) after applying two-sidedness."""
-        if not self.twosided:
+        if not self.twosided or (components and not self.components_twosided):
             return bsdf_id, ctx, None
         back = dr.gather(mi.UInt32, self.back_of, bsdf_id, active)
         flip = (back != NO_BACK) & (ctx.si.wi.z < 0)
@@ -365,19 +369,23 @@ class BSDFSet:
         si.wi = _flip(si.wi, flip)
         return dr.select(flip, back, bsdf_id), ctx.at(si), flip
 
-    def _opacity(self, bsdf_id, ctx, active):
-        """Opacity of masked entries (1 elsewhere), or None if the scene has no mask."""
-        if not self.masked:
+    def _opacity(self, bsdf_id, ctx, active, components=False):
+        """Opacity of masked entries (1 elsewhere), or None if the scene has no mask
+        (``components``: among the entries that blends contain)."""
+        if not self.masked or (components and not self.components_masked):
             return None
         slot = dr.gather(mi.UInt32, self.opacity_of, bsdf_id, active)
         has = active & (slot != NO_BACK)
-        o = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, has, illuminant=False, reach=self.opacity_reach)[0]
-        return dr.select(has, dr.clip(o, 0.0, 1.0), 1.0)
 
-    def _perturb(self, bsdf_id, ctx, active):
+        def lookup():
+            o = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, has, illuminant=False, reach=self.opacity_reach)[0]
+            return mi.Float(dr.select(has, dr.clip(o, 0.0, 1.0), 1.0))
+        return dispatch.when_any(has, lookup, otherwise=mi.Float(1.0), label="opacity")
+
+    def _perturb(self, bsdf_id, ctx, active, components=False):
         """(context in the perturbed frame, local frame, mask) for normal/bump-mapped
         entries, or None if the scene has none."""
-        if not self.perturb_of:
+        if not self.perturb_of or (components and not self.components_perturbed):
             return None
         kinds = self.pert_kinds
         kind = dr.gather(mi.UInt32, self.pert_kind, bsdf_id, active)
@@ -407,14 +415,14 @@ class BSDFSet:
         si.wi = frame.to_local(ctx.si.wi)
         return ctx.at(si), frame, has
 
-    def _resolve(self, bsdf_id, ctx, wo, active):
+    def _resolve(self, bsdf_id, ctx, wo, active, components=False):
         """Apply the entry attributes that change the frame: the side (twosided, with
         ``wo`` mirrored alongside) and the normal/bump perturbation. Returns (entry,
         context, wo, flip mask or None, perturbation or None)."""
-        bsdf_id, ctx, flip = self._side(bsdf_id, ctx, active)
+        bsdf_id, ctx, flip = self._side(bsdf_id, ctx, active, components)
         if flip is not None and wo is not None:
             wo = _flip(wo, flip)
-        return bsdf_id, ctx, wo, flip, self._perturb(bsdf_id, ctx, active)
+        return bsdf_id, ctx, wo, flip, self._perturb(bsdf_id, ctx, active, components)
 
     @staticmethod
     def _to_perturbed(frame, has, wo):
@@ -430,8 +438,8 @@ class BSDFSet:
         return dr.select(ok, f, 0.0), (None if pdf is None else dr.select(ok, pdf, 0.0))
 
     def _entry_eval_pdf(self, bsdf_id, ctx, wo, active, components=False):
-        opacity = self._opacity(bsdf_id, ctx, active)
-        bsdf_id, ctx, wo, flip, pert = self._resolve(bsdf_id, ctx, wo, active)
+        opacity = self._opacity(bsdf_id, ctx, active, components)
+        bsdf_id, ctx, wo, flip, pert = self._resolve(bsdf_id, ctx, wo, active, components)
         if pert is not None:
             ctx, frame, has = pert
             wo_p, ok = self._to_perturbed(frame, has, wo)
@@ -486,10 +494,15 @@ class BSDFSet:
         """(component a, component b, weight of b, is-blend mask) per lane."""
         slot = dr.gather(mi.UInt32, self.blend_w, bsdf_id, active)
         is_blend = active & (slot != NO_BACK)
-        w = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, is_blend, illuminant=False, reach=self.blend_reach)[0]
-        a = dr.select(is_blend, dr.gather(mi.UInt32, self.blend_a, bsdf_id, is_blend), bsdf_id)
-        b = dr.gather(mi.UInt32, self.blend_b, bsdf_id, is_blend)
-        return a, b, dr.select(is_blend, dr.clip(w, 0.0, 1.0), 0.0), is_blend
+
+        def lookup():
+            w = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, is_blend, illuminant=False, reach=self.blend_reach)[0]
+            a = dr.select(is_blend, dr.gather(mi.UInt32, self.blend_a, bsdf_id, is_blend), bsdf_id)
+            b = dr.gather(mi.UInt32, self.blend_b, bsdf_id, is_blend)
+            return a, b, mi.Float(dr.select(is_blend, dr.clip(w, 0.0, 1.0), 0.0))
+        a, b, w = dispatch.when_any(is_blend, lookup, otherwise=(mi.UInt32(bsdf_id), mi.UInt32(0), mi.Float(0.0)),
+                                    label="blend weight")
+        return a, b, w, is_blend
 
     def eval_pdf(self, bsdf_id, ctx, wo, active):
         """(f |cos theta_o|, pdf) of entry ``bsdf_id`` for local direction ``wo``."""
@@ -516,27 +529,46 @@ class BSDFSet:
         u1 = dr.select(is_blend, dr.select(take_b, u1 / dr.maximum(w, 1e-12), (u1 - w) / dr.maximum(1.0 - w, 1e-12)), u1)
         chosen = dr.select(take_b, b, a)
         f, pdf, bs = self._entry_eval_pdf_sample(chosen, ctx, wo, u1, u2, active)
+        # The other component (toward wo and toward the sampled direction), in a
+        # conditional: vector packets without a blend lane skip it.
+        if wo is None:
+            keep = (mi.Float(bs.pdf), mi.Spectrum(bs.weight))
+        else:
+            keep = (_cast(f), _cast(pdf), mi.Float(bs.pdf), mi.Spectrum(bs.weight))
+        r = dispatch.when_any(is_blend, lambda: self._mix_other(bsdf_id, ctx, wo, a, b, w, take_b, is_blend, *keep,
+                                                                bs.wo, bs.delta), otherwise=keep, label="blend")
+        if wo is None:
+            bs.pdf, bs.weight = r
+        else:
+            f, pdf, bs.pdf, bs.weight = r
+        return f, pdf, bs
+
+    def _mix_other(self, bsdf_id, ctx, wo, a, b, w, take_b, is_blend, *values):
+        """A blend's mixture on ``is_blend`` lanes, given its chosen component's values
+        ((f, pdf) toward ``wo`` unless it is None, then the sample's pdf and weight,
+        direction and delta flag): the other component evaluated toward ``wo`` and toward
+        the sampled direction. Returns the mixed values in the order given."""
+        *fp, bs_pdf, bs_weight, bs_wo, bs_delta = values
         other = dr.select(take_b, a, b)
         wc = dr.select(take_b, w, 1.0 - w)
         if wo is not None:
-            # eval toward wo: the other component as well.
+            f, pdf = fp
             fo, po = self._entry_eval_pdf(other, ctx, wo, is_blend, components=True)
-            f = dr.select(is_blend, wc * f + (1.0 - wc) * fo, f)
-            pdf = dr.select(is_blend, wc * pdf + (1.0 - wc) * po, pdf)
+            fp = [mi.Spectrum(dr.select(is_blend, wc * f + (1.0 - wc) * fo, f)),
+                  mi.Float(dr.select(is_blend, wc * pdf + (1.0 - wc) * po, pdf))]
         # The sampled direction: mixture density and weight unless the lobe was a delta
         # (which Mitsuba's blendbsdf mixes as well: ``delta_lobes``).
-        mix = is_blend & (bs.pdf > 0)
+        mix = is_blend & (bs_pdf > 0)
         if self.mixed_delta is None:
-            mix &= ~bs.delta
+            mix &= ~bs_delta
         else:
-            mix &= ~bs.delta | dr.gather(mi.Bool, self.mixed_delta, bsdf_id, is_blend)
-        f_c = bs.weight * bs.pdf
-        f2, p2 = self._entry_eval_pdf(other, ctx, bs.wo, mix, components=True)
-        p_mix = wc * bs.pdf + (1.0 - wc) * p2
-        f_mix = wc * f_c + (1.0 - wc) * f2
-        bs.weight = dr.select(mix, f_mix / dr.maximum(p_mix, 1e-30), bs.weight)
-        bs.pdf = dr.select(mix, p_mix, dr.select(is_blend, bs.pdf * wc, bs.pdf))
-        return f, pdf, bs
+            mix &= ~bs_delta | dr.gather(mi.Bool, self.mixed_delta, bsdf_id, is_blend)
+        f2, p2 = self._entry_eval_pdf(other, ctx, bs_wo, mix, components=True)
+        p_mix = wc * bs_pdf + (1.0 - wc) * p2
+        f_mix = wc * bs_weight * bs_pdf + (1.0 - wc) * f2
+        weight = mi.Spectrum(dr.select(mix, f_mix / dr.maximum(p_mix, 1e-30), bs_weight))
+        pdf_s = mi.Float(dr.select(mix, p_mix, dr.select(is_blend, bs_pdf * wc, bs_pdf)))
+        return (*fp, pdf_s, weight)
 
 
 # Wrapper type name -> the BSDFSet method that parses it.

@@ -26,7 +26,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from .. import backend, memory
+from .. import backend, dispatch, memory
 from .. import spectrum as spec
 from ..samplers import seed_array
 from ..sampling import power_heuristic
@@ -376,6 +376,10 @@ class SamplingIntegrator:
         """Propagate the image adjoint ``grad_img`` (H, W, 3) to the scene parameters.
         ``sample``: the estimator replayed per camera sample (default ``self.sample``;
         the projective integrators add their boundary terms through it)."""
+        with dispatch.whole_packets():
+            self._render_backward(scene, grad_img, sensor, seed, spp, sample)
+
+    def _render_backward(self, scene, grad_img, sensor, seed, spp, sample):
         self._require_differentiable()
         sample = sample or self.sample
         self.prepare(scene, sensor)
@@ -496,10 +500,15 @@ def emitted_mis(scene, sampler, light, si, d, wl, on_light, escaped, prev_p, pre
     ``sampler``) from the previous vertex (weight 1 after a delta vertex). Throughput not
     included."""
     lights = scene.lights
-    Le = lights.L(light - 1, si, wl, on_light)
-    pdf_light = lights.pdf_Li(sampler, light - 1, prev_p, prev_n, si, on_light & ~prev_delta)
-    w_hit = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_light))
-    Le = dr.select(on_light, Le * w_hit, 0.0)
+
+    def hit():
+        Le = lights.L(light - 1, si, wl, on_light)
+        pdf_light = lights.pdf_Li(sampler, light - 1, prev_p, prev_n, si, on_light & ~prev_delta)
+        w_hit = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_light))
+        return mi.Spectrum(dr.select(on_light, Le * w_hit, 0.0))
+
+    # In a conditional, as Mitsuba's emitter calls: packets with no lane on a light skip it.
+    Le = dispatch.when_any(on_light, hit, label="emission")
     if lights.has_infinite:
         for Le_inf, pdf_inf in lights.Le_escaped(d, wl, prev_p, prev_n, escaped, sampler):
             w_inf = dr.select(prev_delta, 1.0, power_heuristic(prev_pdf, pdf_inf))

@@ -17,6 +17,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from .. import dispatch
 from ..bsdfs.base import shading_context
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
@@ -180,7 +181,9 @@ class PathIntegrator(SamplingIntegrator):
             smooth = active_next & bsdfs.smooth(bsdf_id, active_next, nonspecular) & self.next_event
             with dr.resume_grad(when=not primal):
                 # Attached: the sampled radiance ls.L depends on emitter parameters.
-                ls = lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl, smooth)
+                # In a conditional: packets with no smooth lane (all on delta lobes) skip it.
+                ls = dispatch.when_any(smooth, lambda: lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl,
+                                                                        smooth), label="light sample")
             # The attached density keeps the derivative of the solid-angle measure of an
             # area light's sample (dist^2 / cos) when the shading point moves; the light's
             # tables are detached, so it carries no other derivative.

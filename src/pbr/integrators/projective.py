@@ -75,6 +75,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from .. import dispatch
 from .. import spectrum as spec
 from ..bsdfs.base import ShadingContext
 from ..plugins.props import SceneError
@@ -392,7 +393,8 @@ class ProjectivePathIntegrator(PathIntegrator):
             return
         g = grad_img.array if isinstance(grad_img, mi.TensorXf) else mi.Float(np.asarray(grad_img, np.float32).ravel())
         if n_p:
-            self._primary(scene, sensor, seed, n_p, BACKWARD, g)
+            with dispatch.whole_packets():     # as render_backward's replays
+                self._primary(scene, sensor, seed, n_p, BACKWARD, g)
         if n_i:
             self._distr = self._edge_distribution(scene, _detached(self.edges.state()))
             super().render_backward(scene, grad_img, sensor, _mix(seed, 2), n_i, sample=self._indirect_boundary)
