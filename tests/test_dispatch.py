@@ -66,7 +66,6 @@ def test_light_family_that_traces_rays_is_called_outside_the_switch():
 def _when_any_result(mask_from):
     import drjit as dr
     import mitsuba as mi
-    pbr.set_backend("llvm")
     x = dr.arange(mi.Float, 64)
     mask = x >= mask_from
     return x, mask, dispatch.when_any(mask, lambda: (x * 2.0, mi.UInt32(x) + 1), otherwise=(mi.Float(-1.0), mi.UInt32(7)))
@@ -91,7 +90,6 @@ def test_when_any_with_a_literal_mask():
     None."""
     import drjit as dr
     import mitsuba as mi
-    pbr.set_backend("llvm")
     x = dr.arange(mi.Float, 16)
     r = dispatch.when_any(mi.Bool(False), lambda: (x + 1.0, mi.Vector3f(x, x, x)))
     assert np.all(np.asarray(r[0]) == 0) and np.all(np.asarray(r[1]) == 0)
