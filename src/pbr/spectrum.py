@@ -153,13 +153,15 @@ def cie_xyz(lam: mi.Spectrum):
 _D65_MEMO: list = []
 
 
-def _indices(lam) -> tuple:
+def wavelength_key(lam) -> tuple:
+    """Identity of the wavelength variables ``lam`` (their Dr.Jit variable indices): what
+    the values fixed once per camera sample are looked up by."""
     return tuple(c.index for c in lam)
 
 
 def fixed_d65(lam) -> mi.Spectrum | None:
     """D65 at wavelengths ``lam`` if it was computed once for them (see :func:`d65`)."""
-    return _D65_MEMO[2] if _D65_MEMO and _D65_MEMO[1] == _indices(lam) else None
+    return _D65_MEMO[2] if _D65_MEMO and _D65_MEMO[1] == wavelength_key(lam) else None
 
 
 @contextlib.contextmanager
@@ -167,7 +169,7 @@ def d65_fixed_as(lam, value):
     """Within the block, ``value`` is D65 at wavelengths ``lam``: the fixed value passed
     into a symbolic call, whose wavelengths are the call's own variables."""
     prev = list(_D65_MEMO)
-    _D65_MEMO[:] = [lam, _indices(lam), value]
+    _D65_MEMO[:] = [lam, wavelength_key(lam), value]
     try:
         yield
     finally:
@@ -211,7 +213,7 @@ class SampledWavelengths(metaclass=backend.VariantStruct):
             pdf.append(dr.select((l >= LAMBDA_MIN) & (l <= LAMBDA_MAX), 0.0039398042 / (c * c), 0.0))
         lam, pdf = mi.Spectrum(lam), mi.Spectrum(pdf)
         _D65_MEMO[:] = []
-        _D65_MEMO[:] = [lam, _indices(lam), d65(lam)]
+        _D65_MEMO[:] = [lam, wavelength_key(lam), d65(lam)]
         return SampledWavelengths(lam, pdf)
 
     def secondary_terminated(self) -> mi.Bool:

@@ -441,7 +441,7 @@ class TextureSet:
             return
         vals = {s: self._eval_leaf(mi.UInt32(s), mi.Point2f(0.0), lam, mi.Bool(True), True, None,
                                    self.features((s,))) for s in slots}
-        self._fixed = (lam, tuple(c.index for c in lam), vals)
+        self._fixed = (lam, spec.wavelength_key(lam), vals)
 
     def release_per_sample(self) -> None:
         self._fixed = None
@@ -449,7 +449,7 @@ class TextureSet:
     def fixed_for(self, lam) -> dict | None:
         """slot -> the spectrum fixed for it at wavelengths ``lam``, or None."""
         fixed = self._fixed
-        return fixed[2] if fixed is not None and fixed[1] == tuple(c.index for c in lam) else None
+        return fixed[2] if fixed is not None and fixed[1] == spec.wavelength_key(lam) else None
 
     @contextlib.contextmanager
     def fixed_as(self, lam, values: dict):
@@ -457,7 +457,7 @@ class TextureSet:
         the same spectra passed into a symbolic call (``LightSet``'s dispatch), where the
         wavelengths and the values are the call's own variables."""
         prev = self._fixed
-        self._fixed = (lam, tuple(c.index for c in lam), values)
+        self._fixed = (lam, spec.wavelength_key(lam), values)
         try:
             yield
         finally:
