@@ -307,6 +307,12 @@ class Geometry:
             raise
         except Exception as e:
             raise SceneError(f"scene: Mitsuba could not build the geometry: {e}") from None
+        if self.movers and _traces_with_optix():
+            raise SceneError("scene: moving shapes (motion blur of shapes or instances) are not supported on the "
+                             "CUDA backend yet: each moving object is traced in a Mitsuba scene of its own, and "
+                             "OptiX allows one shader binding table per kernel (Dr.Jit disables the other scenes' "
+                             "rays, so the moving objects would be missing from the image); render them with "
+                             "pbr.set_backend('llvm') (camera motion blur works on both)")
         mi_shapes = self.mi_scene.shapes()
         # Mitsuba names each shape by its key (objects built beforehand too); its order
         # is the dict's, but the map does not rely on that.
@@ -537,3 +543,10 @@ def _apply(rows, v, offset, cls):
     if offset is not None:
         r = [r[i] + offset[i] for i in range(3)]
     return cls(*r)
+
+
+def _traces_with_optix() -> bool:
+    """Whether rays are traced by OptiX (the CUDA variants), which allows one shader
+    binding table, so one Mitsuba scene, per kernel (measured on an H200: a second
+    scene's rays in the same kernel are disabled by Dr.Jit and miss)."""
+    return mi.variant().startswith("cuda")
