@@ -98,15 +98,7 @@ def when_any(mask, fn, *args, otherwise=None, label="when any"):
 
 def _zeros(v):
     """Zeros shaped like the result tree ``v``."""
-    if isinstance(v, tuple):
-        return type(v)(_zeros(x) for x in v)
-    fields = getattr(type(v), "DRJIT_STRUCT", None)
-    if fields:
-        out = type(v).__new__(type(v))
-        for k in fields:
-            setattr(out, k, _zeros(getattr(v, k)))
-        return out
-    return dr.zeros(type(v), dr.width(v))
+    return _tree_map(lambda x, _: dr.zeros(type(x), dr.width(x)), v, None)
 
 
 def _switch_outside(index, fns, args, outside):
@@ -125,19 +117,25 @@ def _switch_outside(index, fns, args, outside):
     return out
 
 
-def _select(mask, a, b):
-    """``dr.select`` over a result tree (tuples, Dr.Jit structs, arrays); ``b = None``
-    selects zeros (what ``dr.switch`` gives inactive lanes)."""
+def _tree_map(fn, a, b):
+    """``fn(leaf of a, leaf of b or None)`` over a result tree (tuples, Dr.Jit structs,
+    arrays), rebuilt with ``a``'s structure; ``b`` is None or shaped like ``a``."""
     if isinstance(a, tuple):
         others = b if b is not None else (None,) * len(a)
-        return type(a)(_select(mask, x, y) for x, y in zip(a, others))
+        return type(a)(_tree_map(fn, x, y) for x, y in zip(a, others))
     fields = getattr(type(a), "DRJIT_STRUCT", None)
     if fields:
         out = type(a).__new__(type(a))
         for k in fields:
-            setattr(out, k, _select(mask, getattr(a, k), None if b is None else getattr(b, k)))
+            setattr(out, k, _tree_map(fn, getattr(a, k), None if b is None else getattr(b, k)))
         return out
-    return dr.select(mask, a, type(a)(0) if b is None else b)
+    return fn(a, b)
+
+
+def _select(mask, a, b):
+    """``dr.select`` over a result tree (tuples, Dr.Jit structs, arrays); ``b = None``
+    selects zeros (what ``dr.switch`` gives inactive lanes)."""
+    return _tree_map(lambda x, y: dr.select(mask, x, type(x)(0) if y is None else y), a, b)
 
 
 def loop(state, cond, body, unroll: int, label: str):
