@@ -212,8 +212,7 @@ class SampledWavelengths(metaclass=backend.VariantStruct):
             lam.append(l)
             pdf.append(dr.select((l >= LAMBDA_MIN) & (l <= LAMBDA_MAX), 0.0039398042 / (c * c), 0.0))
         lam, pdf = mi.Spectrum(lam), mi.Spectrum(pdf)
-        _D65_MEMO[:] = []
-        _D65_MEMO[:] = [lam, wavelength_key(lam), d65(lam)]
+        _D65_MEMO[:] = [lam, wavelength_key(lam), _per_lambda(_Tables.get()["d65"], lam)]
         return SampledWavelengths(lam, pdf)
 
     def secondary_terminated(self) -> mi.Bool:
