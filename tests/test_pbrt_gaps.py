@@ -9,12 +9,7 @@ import pytest
 import pbr
 from pbr.scene.pbrt import convert, to_dict
 from pbr.scene.xml import XMLError
-
-
-def write(tmp_path, text, name="scene.pbrt"):
-    p = tmp_path / name
-    p.write_text(text)
-    return str(p)
+from test_pbrt import write
 
 
 def render(path, **kw):

@@ -9,12 +9,7 @@ from pbr.plugins.props import SceneError
 from pbr.scene.pbrt import convert, to_dict
 from pbr.scene.xml import XMLError
 from test_textures_pbrt import _plane_scene, _texture_values
-
-
-def write(tmp_path, text, name="scene.pbrt"):
-    p = tmp_path / name
-    p.write_text(text)
-    return str(p)
+from test_pbrt import write
 
 
 # -- remaproughness of roughness textures -------------------------------------------------------
