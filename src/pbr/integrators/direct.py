@@ -25,7 +25,7 @@ from ..bsdfs.base import ShadingContext
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
 from ..spectrum import first_only
-from .base import INTEGRATORS, SamplingIntegrator
+from .base import INTEGRATORS, SamplingIntegrator, light_reaches
 
 
 @dr.syntax
@@ -124,10 +124,10 @@ class DirectIntegrator(SamplingIntegrator):
             u_pos = rng.next_2d()
             ls = lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl, smooth)
             em = smooth & (ls.pdf > 0)
-            em &= geo.unoccluded(si, ls.p, em)
             f, pdf_b = bsdfs.eval_pdf(bsdf_id, ctx, si.to_local(ls.wi), em)
             w = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf * frac_em, pdf_b * frac_bs)) * inv_em
-            L += dr.select(em, f * ls.L * (w / ls.pdf), 0.0)
+            Ld = f * ls.L * (w / ls.pdf)
+            L += dr.select(light_reaches(geo, si, ls.p, Ld, em), Ld, 0.0)
             i += 1
             rng_state = rng.loop_state()
         rng.set_loop_state(rng_state)

@@ -23,7 +23,7 @@ from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
 from ..spectrum import first_only
 from .base import (INTEGRATORS, BACKWARD, PRIMAL, SamplingIntegrator, depth_limit, emitted_mis, forward_derivative,
-                   loop_ray, mis_state, path_state, ray_state)
+                   light_reaches, loop_ray, mis_state, path_state, ray_state)
 
 
 def face_the_ray(si, ray, mask):
@@ -190,9 +190,8 @@ class PathIntegrator(SamplingIntegrator):
             pdf_Li = dr.detach(ls.pdf) if self.solid_angle_nee else ls.pdf
             ls.pdf = dr.detach(ls.pdf)
             em = smooth & (ls.pdf > 0)
-            em &= geo.unoccluded(si, ls.p, em)
             # The BSDF is evaluated toward the light and sampled (to continue the path)
-            # in one call, so texture lookups are shared.
+            # in one call, so texture lookups are shared; the shadow ray comes after it.
             u1 = rng.next_float32()
             u2 = rng.next_2d()
             with dr.resume_grad(when=not primal):
@@ -205,13 +204,16 @@ class PathIntegrator(SamplingIntegrator):
                 # would add d(w_em) without its counterpart -d(w_em) (biased gradients
                 # for any parameter the BSDF pdf depends on: eta, alpha).
                 w_em = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf, dr.detach(pdf_em)))
-                Ld = dr.select(em, beta * f_em * ls.L * (w_em / pdf_Li), 0.0)
+                Ld = beta * f_em * ls.L * (w_em / pdf_Li)      # unoccluded
                 # A delta lobe cannot be evaluated toward a direction; its attached value
                 # is the sample's weight times the lobe's choice probability (e.g. the
                 # Fresnel reflectance of a smooth dielectric). A stochastic BSDF's eval
                 # is another random estimate than the sample's weight: there too the
                 # sample's own weight is differentiated (its pdf is detached).
                 f_sampled = bs.weight * bs.pdf
+            em = light_reaches(geo, si, ls.p, Ld, em, skip_zero=primal)
+            with dr.resume_grad(when=not primal):
+                Ld = dr.select(em, Ld, 0.0)
             replay_sample = bs.delta | bsdfs.stochastic(bsdf_id, active_next)
             bs = dr.detach(bs)
             seen |= hit & ~skip & ~bs.null

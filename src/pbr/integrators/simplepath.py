@@ -24,7 +24,7 @@ import mitsuba as mi
 
 from ..bsdfs.base import REFLECTION, TRANSMISSION, ShadingContext
 from ..spectrum import first_only
-from .base import INTEGRATORS, SamplingIntegrator, loop_ray, path_state, pbrt_max_depth, ray_state
+from .base import INTEGRATORS, SamplingIntegrator, light_reaches, loop_ray, path_state, pbrt_max_depth, ray_state
 from .direct import hit_emission
 
 # How a direction is drawn without BSDF sampling (per BSDF entry).
@@ -143,9 +143,9 @@ class SimplePathIntegrator(SamplingIntegrator):
                 lit = scatter & bsdfs.smooth(bsdf_id, scatter)
                 ls = lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl, lit)
                 em = lit & (ls.pdf > 0)
-                em &= geo.unoccluded(si, ls.p, em)
                 f_em = bsdfs.eval_pdf(bsdf_id, ctx, si.to_local(ls.wi), em)[0]
-                L += dr.select(em, beta * f_em * ls.L / ls.pdf, 0.0)
+                Ld = beta * f_em * ls.L / ls.pdf
+                L += dr.select(light_reaches(geo, si, ls.p, Ld, em), Ld, 0.0)
 
             wi, weight, specular, terminated = self._next_direction(
                 scene, rng, si, ctx, bsdf_id, -ray.d, uniform_kind, specular, terminated, scatter)

@@ -19,7 +19,7 @@ from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..samplers import IndependentSampler
 from ..sampling import power_heuristic
 from ..spectrum import SampledWavelengths, first_only
-from .base import INTEGRATORS, SamplingIntegrator, _progress, emitted_mis, mis_state, path_state
+from .base import INTEGRATORS, SamplingIntegrator, _progress, light_reaches, emitted_mis, mis_state, path_state
 from .lightpath import sample_importance, shading_correction, start_light_path
 
 UNLIMITED = 0xFFFFFFF0
@@ -305,13 +305,13 @@ class SPPMIntegrator(SamplingIntegrator):
             smooth = active_next & bsdfs.smooth(bsdf_id, active_next)
             ls = lights.sample_Li(self.light_sampler, si, u_light, u_pos, wl, smooth)
             em = smooth & (ls.pdf > 0)
-            em &= geo.unoccluded(si, ls.p, em)
             wo_em = si.to_local(ls.wi)
             u1 = rng.next_float32()
             u2 = mi.Point2f(rng.next_float32(), rng.next_float32())
             f_em, pdf_em, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_em, u1, u2, active_next)
             w_em = dr.select(ls.delta, 1.0, power_heuristic(ls.pdf, pdf_em))
-            Ld = dr.select(em, beta * f_em * ls.L * (w_em / ls.pdf), 0.0)
+            Ld = beta * f_em * ls.L * (w_em / ls.pdf)
+            Ld = dr.select(light_reaches(geo, si, ls.p, Ld, em), Ld, 0.0)
             L = L + Le + Ld
 
             # The visible point: the first vertex with a diffuse lobe.

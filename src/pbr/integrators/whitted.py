@@ -12,7 +12,7 @@ from ..bsdfs.base import ShadingContext
 from ..samplers import IndependentSampler
 from ..samplers.independent import IndependentStream
 from ..spectrum import N_WAVELENGTHS, SampledWavelengths, first_only
-from .base import INTEGRATORS, SamplingIntegrator
+from .base import INTEGRATORS, SamplingIntegrator, light_reaches
 from .direct import hit_emission, intersect_camera_ray
 
 
@@ -136,9 +136,9 @@ class WhittedIntegrator(SamplingIntegrator):
                 u = mi.Point2f(rng.next_float32(), rng.next_float32())
                 ls = lights.sample_Li_light(k, si, u, wl, smooth)
                 em = smooth & (ls.pdf > 0)
-                em &= geo.unoccluded(si, ls.p, em)
                 f = bsdfs.eval_pdf(bsdf_id, ctx, si.to_local(ls.wi), em)[0]
-                L += dr.select(em, f * ls.L / ls.pdf, 0.0)
+                Ld = f * ls.L / ls.pdf
+                L += dr.select(light_reaches(geo, si, ls.p, Ld, em), Ld, 0.0)
                 k += 1
                 rng_state = rng.loop_state()
             rng.set_loop_state(rng_state)
