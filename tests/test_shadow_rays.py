@@ -20,14 +20,14 @@ def _floor_scene(light_below: bool, reflectance=0.5, integrator="path"):
     z, angle = (-1.0, 0.0) if light_below else (1.0, 180.0)
     return {
         "type": "scene",
-        "integrator": {"type": integrator, "max_depth": 2} if integrator == "path" else {"type": integrator},
+        "integrator": {"type": integrator, "max_depth": 2} if integrator in ("path", "volpath", "prbvolpath") else {"type": integrator},
         "sensor": {"type": "perspective", "fov": 30.0,
                    "to_world": T().look_at(origin=[0, 0, 3], target=[0, 0, 0], up=[0, 1, 0]),
                    "film": {"type": "hdrfilm", "width": 8, "height": 8, "rfilter": {"type": "box"}},
                    "sampler": {"type": "independent", "sample_count": 4}},
         "floor": {"type": "rectangle", "bsdf": {"type": "diffuse", "reflectance": reflectance}},
         "light": {"type": "rectangle", "to_world": T().translate([2, 0, z]).rotate([1, 0, 0], angle).scale(0.2),
-                  "emitter": {"type": "area", "radiance": 10.0}},
+                  "emitter": {"type": "area", "radiance": 30.0}},
     }
 
 
@@ -49,7 +49,7 @@ def _count_shadow_lanes(scene, **render):
     return int(count[0]), img
 
 
-@pytest.mark.parametrize("integrator", ["path", "direct", "whitted"])
+@pytest.mark.parametrize("integrator", ["path", "direct", "whitted", "volpath", "prbvolpath"])
 def test_no_shadow_ray_toward_a_light_behind_the_surface(integrator):
     n_above, img_above = _count_shadow_lanes(pbr.load_dict(_floor_scene(False, integrator=integrator)))
     n_below, img_below = _count_shadow_lanes(pbr.load_dict(_floor_scene(True, integrator=integrator)))
@@ -78,12 +78,16 @@ def test_blocked_or_not_the_image_is_unchanged():
     assert np.array_equal(img_skip, img_all)
 
 
-def test_zero_reflectance_keeps_its_derivative():
+@pytest.mark.parametrize("integrator", ["path", "prbvolpath"])
+def test_zero_reflectance_keeps_its_derivative(integrator):
     """A reflectance of 0 makes every light sample's estimate 0 but not its derivative:
     derivative passes trace those shadow rays. With direct light only (max_depth 2) the
     image is linear in the reflectance, so d image / d reflectance at 0 is the image at 1
-    (the same samples: ``seed_grad`` = ``seed``)."""
-    scene = pbr.load_dict(_floor_scene(False, reflectance=0.0))
+    (the same samples: ``seed_grad`` = ``seed``), shadow included."""
+    d = _floor_scene(False, reflectance=0.0, integrator=integrator)
+    # An occluder out of view that shadows part of the floor: the derivative must see it.
+    d["occluder"] = {"type": "rectangle", "to_world": T().translate([1.2, 0, 0.5]).scale(0.3)}
+    scene = pbr.load_dict(d)
     params = pbr.traverse(scene)
     key = "floor.bsdf.reflectance.value"
     assert key in params, list(params.keys())

@@ -527,8 +527,14 @@ def light_reaches(geo, si, p, contribution, em, skip_zero: bool = True):
     ``skip_zero=False`` (derivative passes) traces every lane of ``em``: a contribution
     of zero may have a nonzero derivative (a reflectance of 0 being optimised)."""
     if skip_zero:
-        em = em & dr.any(dr.detach(contribution) != 0)
+        em = nonzero_estimate(contribution, em)
     return em & geo.unoccluded(si, p, em)
+
+
+def nonzero_estimate(contribution, em):
+    """Lanes of ``em`` whose light-sample ``contribution`` (a spectrum) is not zero: the
+    ones worth a shadow ray (:func:`light_reaches`)."""
+    return em & dr.any(dr.detach(contribution) != 0)
 
 
 def forward_derivative(Lo) -> mi.Spectrum:

@@ -16,7 +16,7 @@ from ..sampling import power_heuristic
 from ..spectrum import first_only
 from . import volume
 from .base import (INTEGRATORS, BACKWARD, FORWARD, PRIMAL, ConditionalState, depth_limit, emitted_mis,
-                   forward_derivative, mis_state, path_state)
+                   forward_derivative, mis_state, nonzero_estimate, path_state)
 from .volpath import _MediumAware
 
 
@@ -288,6 +288,10 @@ class PRBVolPathIntegrator(_MediumAware):
             bs = dr.detach(bs)
             sray, s_med = volume.shadow_ray(scene, shape, si, ls, sc, p_sc, medium, nee & rs)
             nee &= ls.pdf > 0
+            if dr.hint(primal, mode="scalar"):
+                # A shadow ray only where it can change the estimate (light_reaches' rule;
+                # derivative passes trace them all: a zero estimate may have a derivative).
+                nee = nonzero_estimate(Ld_unocc, nee)
             state = rng.copy()
             T_sh, _ = self._transmittance(scene, rng, sray, ls.p, s_med, wl, PRIMAL, dL, dL, dL_fwd, nee)
             if dr.hint(primal, mode="scalar"):

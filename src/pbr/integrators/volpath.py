@@ -15,7 +15,7 @@ from ..bsdfs.base import ShadingContext, shading_context
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..spectrum import first_only
 from . import subsurface, volume
-from .base import INTEGRATORS, ConditionalState, SamplingIntegrator, depth_limit, mis_state, path_state
+from .base import INTEGRATORS, ConditionalState, SamplingIntegrator, depth_limit, mis_state, nonzero_estimate, path_state
 
 
 def _null_weights(f, r_u, r_l, T_acc, sigma_n, sigma_maj, inv_pdf, mask):
@@ -219,6 +219,8 @@ class VolPathIntegrator(_MediumAware):
         u1 = rng.next_float32()
         u2 = rng.next_2d()
         f_em, pdf_em, bs = lobe(wo_em, ls, u1, u2)
+        # A shadow ray only where it can change the estimate (light_reaches' rule).
+        nee = nonzero_estimate(f_em * ls.L, nee)
         sray, s_med = volume.shadow_ray(scene, shape, si, ls, sc, p_sc, medium, nee & rs)
         if len(media) > 0:
             T_ray, tr_u, tr_l, n_shadow = volume.transmittance(
