@@ -20,7 +20,7 @@ def _floor_scene(light_below: bool, reflectance=0.5, integrator="path"):
     z, angle = (-1.0, 0.0) if light_below else (1.0, 180.0)
     return {
         "type": "scene",
-        "integrator": {"type": integrator, "max_depth": 2} if integrator in ("path", "volpath", "prbvolpath") else {"type": integrator},
+        "integrator": {"type": integrator, "max_depth": 2} if integrator in ("path", "volpath", "prbvolpath", "bdpt") else {"type": integrator},
         "sensor": {"type": "perspective", "fov": 30.0,
                    "to_world": T().look_at(origin=[0, 0, 3], target=[0, 0, 0], up=[0, 1, 0]),
                    "film": {"type": "hdrfilm", "width": 8, "height": 8, "rfilter": {"type": "box"}},
@@ -57,6 +57,24 @@ def test_no_shadow_ray_toward_a_light_behind_the_surface(integrator):
     # 8 x 8 pixels, 4 spp: every camera ray hits the floor and samples the light.
     assert n_above == 256 and img_above.mean() > 0.01
     assert n_below == 0 and img_below.max() == 0.0
+
+
+@pytest.mark.parametrize("integrator, module", [("bdpt", "bdpt"), ("ptracer", "lightpath")])
+def test_light_paths_connect_only_where_both_ends_scatter(monkeypatch, integrator, module):
+    """bdpt's light sample (s = 1) and connections (light subpaths to the camera's
+    vertices, light vertices to the camera), and the light tracer's connections to the
+    camera: a point light under the floor lights only its back, so no connection needs a
+    shadow ray; with the check removed they are traced (and the image is the same, black)."""
+    import importlib
+    d = _floor_scene(True, integrator=integrator)
+    d["light"] = {"type": "point", "position": [0.3, 0.2, -1.0], "intensity": 10.0}
+    n_skip, img_skip = _count_shadow_lanes(pbr.load_dict(d))
+    monkeypatch.setattr(importlib.import_module(f"pbr.integrators.{module}"), "nonzero_estimate",
+                        lambda contribution, em: em)
+    n_all, img_all = _count_shadow_lanes(pbr.load_dict(d))
+    print(f"{integrator}: shadow-ray lanes {n_skip}, without the check {n_all}")
+    assert n_skip == 0 and n_all > 0
+    assert np.array_equal(img_skip, img_all) and img_skip.max() == 0.0
 
 
 def test_blocked_or_not_the_image_is_unchanged():

@@ -14,7 +14,7 @@ from ..bsdfs.base import ShadingContext
 from ..lights.directional import DirectionalLight
 from ..lights.directionalarea import DirectionalAreaLight
 from ..spectrum import first_only
-from .base import INTEGRATORS, loop_ray, ray_state
+from .base import INTEGRATORS, loop_ray, nonzero_estimate, ray_state
 from .lightpath import (LightTracingIntegrator, connect_to_camera, eval_importance, lens_sample,
                         sample_importance, shading_correction, start_light_path)
 
@@ -439,6 +439,13 @@ class BDPTIntegrator(LightTracingIntegrator):
                 inf_l = (kind & (INFINITE_LIGHT | DELTA_DIRECTION)) != 0
                 delta_l = (kind & (DELTA_POSITION | DELTA_DIRECTION)) != 0
                 dist = dr.norm(ls.p - si.p)
+                wo_l = si.to_local(ls.wi)
+            # One BSDF call gives the value toward the light and the continuation.
+            f_l, pdf_l, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_l, u1, u2, go | nee)
+            bs = dr.detach(bs)
+            if dr.hint(has_lights, mode="scalar"):
+                # A ray to the light only where the estimate is not zero (light_reaches).
+                em = nonzero_estimate(f_l * ls.L, em)
                 if dr.hint(area_lights, mode="scalar"):
                     # Trace to the light point: the hit gives the light's normals there.
                     sray = si.spawn_ray_to(ls.p)
@@ -452,11 +459,6 @@ class BDPTIntegrator(LightTracingIntegrator):
                     ng_l = mi.Normal3f(0.0)
                     ns_l = mi.Normal3f(0.0)
                 ng_l = dr.select(inf_l | ((kind & DELTA_POSITION) != 0), 0.0, ng_l)
-                wo_l = si.to_local(ls.wi)
-            # One BSDF call gives the value toward the light and the continuation.
-            f_l, pdf_l, bs = bsdfs.eval_pdf_sample(bsdf_id, ctx, wo_l, u1, u2, go | nee)
-            bs = dr.detach(bs)
-            if dr.hint(has_lights, mode="scalar"):
                 pdf_pos, pdf_e = lights.pdf_Le(lt, ls.p, ns_l, -ls.wi, em)
                 fwd_l = dr.select(inf_l, infinite_density(lights, self.emission_sampler, ls.wi, em & inf_l),
                                   lights.pmf_Le(self.emission_sampler, lt, em) * pdf_pos)
@@ -489,7 +491,6 @@ class BDPTIntegrator(LightTracingIntegrator):
                 d2 = dr.squared_norm(dv)
                 dn = dv * dr.rsqrt(d2)
                 ok &= d2 > 0
-                ok &= geo.unoccluded(si, q.p, ok)
                 ctx_q = ShadingContext(si_q, wl)
                 wo_t = si.to_local(dn)
                 wo_q = si_q.to_local(-dn)
@@ -497,6 +498,9 @@ class BDPTIntegrator(LightTracingIntegrator):
                 f_q, pdf_q = eval_importance(bsdfs, bsdf_q, ctx_q, wo_q, ok)
                 corr, side_ok = shading_correction(si_q, -q.d, -dn)
                 ok &= side_ok
+                # The shadow ray only where both ends scatter along it (light_reaches).
+                ok = nonzero_estimate(f_t * f_q, ok)
+                ok &= geo.unoccluded(si, q.p, ok)
                 pdf_t_rev = reverse_pdf(bsdfs, bsdf_id, ctx, wo_t, si.wi, ok)
                 pdf_q_rev = reverse_pdf(bsdfs, bsdf_q, ctx_q, wo_q, si_q.wi, ok)
                 q_inf = (q.flags & INFINITE) != 0

@@ -29,7 +29,7 @@ import numpy as np
 
 from .. import spectrum as spec
 from ..bsdfs.base import TRANSMISSION, ShadingContext
-from .base import NonFinite, SamplingIntegrator, clamp_sample
+from .base import NonFinite, SamplingIntegrator, clamp_sample, nonzero_estimate
 
 # Mitsuba's ray offset (math::RayEpsilon): rays leaving a surface start this far (relative
 # to the magnitude of the point) along its normal.
@@ -212,11 +212,13 @@ def connect_to_camera(scene, camera, si, bsdf_id, wl, beta, active, cs=None):
     if cs is None:
         cs = camera.sample_Wi(si.p)
     ok = active & cs.valid
-    ok &= scene.geometry.unoccluded(si, cs.p, ok)
     wo_local = si.to_local(cs.wi)
     ctx = ShadingContext(si, wl)
     f, _ = eval_importance(scene.bsdfs, bsdf_id, ctx, wo_local, ok)
     corr, side_ok = shading_correction(si, si.to_world(si.wi), cs.wi)
     ok &= side_ok & (cs.pdf > 0)
     contrib = beta * f * (corr * cs.We / dr.select(ok, cs.pdf, 1.0))
+    # The shadow ray only where the contribution is not zero (base.light_reaches' rule).
+    ok = nonzero_estimate(contrib, ok)
+    ok &= scene.geometry.unoccluded(si, cs.p, ok)
     return dr.select(ok, contrib, 0.0), cs.pos, ok
