@@ -183,10 +183,22 @@ def history(fn) -> tuple[float, list]:
 
 
 def ptxas_info(path: str) -> str:
-    """Registers / stack / spills of a PTX file by ptxas -v (compile only), or why not."""
+    """Registers / stack / spills of a PTX file by ptxas -v, or why not. OptiX kernels call
+    OptiX's intrinsics (``_optix_trace_*``), unresolved here, so they are compiled one
+    function at a time (``-c``), which refuses Dr.Jit's ``.pragma "enable_smem_spilling"``
+    (spills to shared memory; measured on an H200: "not allowed for per-function
+    compilation modes"): that line is left out, so the spill figures are those without it."""
     exe = shutil.which("ptxas")
     if not exe:
         return "no ptxas"
+    with open(path) as f:
+        ptx = f.read()
+    note = ""
+    if "enable_smem_spilling" in ptx:
+        path = path + ".nosmem.ptx"
+        with open(path, "w") as f:
+            f.write("".join(line for line in ptx.splitlines(True) if "enable_smem_spilling" not in line))
+        note = " (without enable_smem_spilling)"
     p = subprocess.run([exe, "-arch=sm_90", "-v", "-c", path, "-o", os.devnull], capture_output=True, text=True)
     log = p.stderr + p.stdout
     regs = re.findall(r"Used (\d+) registers", log)
@@ -198,7 +210,7 @@ def ptxas_info(path: str) -> str:
         st = max(int(s[0]) for s in spill)
         sp = sum(int(s[1]) + int(s[2]) for s in spill)
         out += f", stack frame max {st} B, spill stores+loads {sp} B"
-    return out
+    return out + note
 
 
 def kernel_ms(h: list) -> float:
