@@ -77,6 +77,7 @@ def main(argv=None):
     ap.add_argument("--res", type=int, default=64)
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--max-depth", type=int, default=None, help="the path integrator's max_depth (default: the scene's)")
+    ap.add_argument("--backend", default="llvm", choices=["llvm"], help="Embree's queries: the LLVM backend only")
     a = ap.parse_args(argv)
     shim = os.environ.get("PBR_RAY_COUNTS")
     if not shim or shim not in os.environ.get("LD_PRELOAD", ""):
@@ -90,7 +91,7 @@ def main(argv=None):
     from pbr.scene.xml import to_xml
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     from bench_scenes import scene_dicts
-    pbr.set_backend("llvm")
+    pbr.set_backend(a.backend)
     lib = ctypes.CDLL(shim)
     dicts = scene_dicts(a.res, a.spp)
     print(f"{a.res} wide, {a.spp} spp, one warm render each")

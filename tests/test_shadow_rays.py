@@ -16,7 +16,6 @@ def _floor_scene(light_below: bool, reflectance=0.5, integrator="path"):
     """A one-sided diffuse floor (normal +z) seen from above, lit by a small area light
     facing it from above (outside the view), or (``light_below``) from below: there every light sample is
     behind the floor, where its BSDF is zero."""
-    pbr.set_backend("llvm")
     z, angle = (-1.0, 0.0) if light_below else (1.0, 180.0)
     return {
         "type": "scene",
