@@ -149,7 +149,7 @@ def test_every_emitter_kind_renders_as_with_per_vertex_lookups(monkeypatch, emit
     new = np.asarray(pbr.render(scene, spp=4, seed=2))
     assert any(hits) == fixed
     monkeypatch.setattr(TextureSet, "MAX_FIXED", 0)
-    monkeypatch.setattr(S, "fixed_d65", lambda lam: None)
+    monkeypatch.setattr(S, "fixed_for", lambda lam: None)
     old = np.asarray(pbr.render(scene, spp=4, seed=2))
     assert np.all(np.isfinite(new)) and new.mean() > 0
     assert np.array_equal(new, old)
@@ -158,16 +158,20 @@ def test_every_emitter_kind_renders_as_with_per_vertex_lookups(monkeypatch, emit
 def test_d65_reaches_the_lights_switch(monkeypatch):
     """With an environment map and a point light (two families: a symbolic call), the
     environment's D65 factor inside the call is the one fixed per sample."""
-    seen = []
-    orig = S.fixed_d65
+    seen, keys = [], set()
+    orig = S.fixed_for
 
     def counted(lam):
         v = orig(lam)
-        seen.append(v is not None)
+        seen.append(v is not None and S.D65 in v)
+        if seen[-1]:
+            keys.add(S.wavelength_key(lam))
         return v
 
-    monkeypatch.setattr(S, "fixed_d65", counted)
+    monkeypatch.setattr(S, "fixed_for", counted)
     scene = pbr.load_dict(stage(e=_with_sky(ENVMAP), a=POINT))
     pbr.render(scene, spp=4, seed=2)
     # the switch forwards it (one check there) and the envmap's lookups inside find it
     assert sum(seen) >= 3, seen
+    # found at the sample's wavelengths and at the call's own (forwarded) variables
+    assert len(keys) >= 2, keys

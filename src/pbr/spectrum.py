@@ -147,10 +147,15 @@ def cie_xyz(lam: mi.Spectrum):
     return tuple(_per_lambda(t[k], lam) for k in "xyz")
 
 
-# The D65 values at the wavelengths sampled last (see SampledWavelengths.sample_visible):
+# ------------------------------------------------------------------ values fixed per sample
+# A path keeps its camera sample's wavelengths at every vertex, so what depends on them
+# alone is computed once per sample and looked up by the wavelengths' Dr.Jit variables:
 # (those wavelengths, kept alive so that their variable indices cannot be reused; the
-# indices; D65 there).
-_D65_MEMO: list = []
+# indices; name -> value). D65 is named :data:`D65` (set by
+# SampledWavelengths.sample_visible), the lights' constant spectra by their texture slots
+# (TextureSet.fix_per_sample, for a pass).
+_PER_SAMPLE: list = []
+D65 = "d65"
 
 
 def wavelength_key(lam) -> tuple:
@@ -159,21 +164,35 @@ def wavelength_key(lam) -> tuple:
     return tuple(c.index for c in lam)
 
 
-def fixed_d65(lam) -> mi.Spectrum | None:
-    """D65 at wavelengths ``lam`` if it was computed once for them (see :func:`d65`)."""
-    return _D65_MEMO[2] if _D65_MEMO and _D65_MEMO[1] == wavelength_key(lam) else None
+def fixed_for(lam) -> dict | None:
+    """name -> value fixed once per camera sample at wavelengths ``lam``, or None."""
+    return _PER_SAMPLE[2] if _PER_SAMPLE and _PER_SAMPLE[1] == wavelength_key(lam) else None
+
+
+def fix(lam, values: dict) -> None:
+    """Fix ``values`` (name -> value) at wavelengths ``lam``, next to those already fixed
+    there; what was fixed at other wavelengths is dropped."""
+    _PER_SAMPLE[:] = [lam, wavelength_key(lam), {**(fixed_for(lam) or {}), **values}]
+
+
+def release(keep=(D65,)) -> None:
+    """Drop the fixed values but those named in ``keep`` (a pass's emitter spectra go,
+    the sample's D65 stays)."""
+    if _PER_SAMPLE:
+        _PER_SAMPLE[2] = {k: v for k, v in _PER_SAMPLE[2].items() if k in keep}
 
 
 @contextlib.contextmanager
-def d65_fixed_as(lam, value):
-    """Within the block, ``value`` is D65 at wavelengths ``lam``: the fixed value passed
-    into a symbolic call, whose wavelengths are the call's own variables."""
-    prev = list(_D65_MEMO)
-    _D65_MEMO[:] = [lam, wavelength_key(lam), value]
+def fixed_as(lam, values: dict):
+    """Within the block, ``values`` (name -> value) are the values fixed at wavelengths
+    ``lam``: those passed into a symbolic call (``LightSet``'s dispatch), whose wavelengths
+    and values are the call's own variables."""
+    prev = list(_PER_SAMPLE)
+    _PER_SAMPLE[:] = [lam, wavelength_key(lam), values]
     try:
         yield
     finally:
-        _D65_MEMO[:] = prev
+        _PER_SAMPLE[:] = prev
 
 
 def d65(lam: mi.Spectrum) -> mi.Spectrum:
@@ -181,9 +200,9 @@ def d65(lam: mi.Spectrum) -> mi.Spectrum:
     drew (``SampledWavelengths.sample_visible``) it is the value computed there, once per
     sample: emitters look it up at every path vertex, inside loops that would otherwise
     repeat the table lookups at each bounce."""
-    fixed = fixed_d65(lam)
-    if fixed is not None:
-        return fixed
+    fixed = fixed_for(lam)
+    if fixed is not None and D65 in fixed:
+        return fixed[D65]
     return _per_lambda(_Tables.get()["d65"], lam)
 
 
@@ -212,7 +231,7 @@ class SampledWavelengths(metaclass=backend.VariantStruct):
             lam.append(l)
             pdf.append(dr.select((l >= LAMBDA_MIN) & (l <= LAMBDA_MAX), 0.0039398042 / (c * c), 0.0))
         lam, pdf = mi.Spectrum(lam), mi.Spectrum(pdf)
-        _D65_MEMO[:] = [lam, wavelength_key(lam), _per_lambda(_Tables.get()["d65"], lam)]
+        fix(lam, {D65: _per_lambda(_Tables.get()["d65"], lam)})
         return SampledWavelengths(lam, pdf)
 
     def secondary_terminated(self) -> mi.Bool:

@@ -8,8 +8,6 @@ are evaluated on rays that leave the scene.
 
 from __future__ import annotations
 
-import contextlib
-
 import numpy as np
 import drjit as dr
 import mitsuba as mi
@@ -127,31 +125,23 @@ class LightSet:
 
     def _switch(self, fam, fns, local, args, active, outside=()):
         """``dispatch.switch`` over the families. What was fixed once per camera sample
-        for the wavelengths among ``args`` (D65, the emitter spectra of
-        TextureSet.fix_per_sample) goes along as arguments: a symbolic call receives its
-        arguments as new variables and cannot read the caller's other arrays."""
+        for the wavelengths among ``args`` (``spectrum.fixed_for``: D65, the emitter
+        spectra) goes along as an argument: a symbolic call receives its arguments as new
+        variables and cannot read the caller's other arrays."""
         at = next((i for i, a in enumerate(args) if isinstance(a, SampledWavelengths)), None)
-        lam = args[at].lambda_ if at is not None else None
-        fixed = (self.textures.fixed_for(lam) or {}) if lam is not None else {}
-        d65 = spec.fixed_d65(lam) if lam is not None else None
-        if not fixed and d65 is None:
+        fixed = spec.fixed_for(args[at].lambda_) if at is not None else None
+        if not fixed:
             return dispatch.switch(fam, fns, local, *args, active, outside=outside)
-        slots = sorted(fixed)
+        fixed = {k: fixed[k] for k in sorted(fixed, key=str)}
 
         def forwarding(fn):
             def call(local, *rest):
-                *a, (d65_in, values), on = rest
-                lam_in = a[at].lambda_
-                with contextlib.ExitStack() as stack:
-                    if d65_in is not None:
-                        stack.enter_context(spec.d65_fixed_as(lam_in, d65_in))
-                    if values:
-                        stack.enter_context(self.textures.fixed_as(lam_in, dict(zip(slots, values))))
+                *a, values, on = rest
+                with spec.fixed_as(a[at].lambda_, values):
                     return fn(local, *a, on)
             return call
 
-        return dispatch.switch(fam, [forwarding(fn) for fn in fns], local, *args,
-                               (d65, [fixed[k] for k in slots]), active, outside=outside)
+        return dispatch.switch(fam, [forwarding(fn) for fn in fns], local, *args, fixed, active, outside=outside)
 
     # -- used by integrators -----------------------------------------------------------
     def L(self, light, si, wl, active):

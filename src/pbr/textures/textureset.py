@@ -18,7 +18,6 @@ metals for every diffuse albedo).
 
 from __future__ import annotations
 
-import contextlib
 from types import SimpleNamespace
 
 import drjit as dr
@@ -55,7 +54,6 @@ class TextureSet:
         self.mesh_geometry: dict = {}
         self.tables = TextureTables()
         self._features: dict = {}       # reach -> what its evaluation must trace
-        self._fixed = None              # emitter spectra of a pass's wavelengths (fix_per_sample)
 
     # -- building -------------------------------------------------------------------
     def add(self, tex) -> int:
@@ -431,42 +429,26 @@ class TextureSet:
         spectra) at a pass's wavelengths ``lam`` once, before the integrator's loop: they
         depend on the wavelengths only, which a path keeps at every vertex, and a light's
         spectrum is looked up at each bounce (emission found and next-event estimation),
-        each time a gather and a sigmoid per wavelength. :meth:`eval` returns them for
-        these wavelengths until :meth:`release_per_sample`. Not where the constants carry
+        each time a gather and a sigmoid per wavelength. They join the values fixed per
+        sample (``spectrum.fix``, under their slots), which :meth:`eval` returns for these
+        wavelengths until :meth:`release_per_sample`. Not where the constants carry
         derivatives (the derivative passes evaluate them attached, inside the loop)."""
-        self._fixed = None
+        self.release_per_sample()
         slots = sorted(s for s in set(slots) if self.kind_of(s) == CONSTANT)
         # (the AD index: under dr.suspend_grad, where passes are traced, grad_enabled is False)
         if not slots or len(slots) > self.MAX_FIXED or self.tables.constants.packed.index_ad != 0:
             return
-        vals = {s: self._eval_leaf(mi.UInt32(s), mi.Point2f(0.0), lam, mi.Bool(True), True, None,
-                                   self.features((s,))) for s in slots}
-        self._fixed = (lam, spec.wavelength_key(lam), vals)
+        spec.fix(lam, {s: self._eval_leaf(mi.UInt32(s), mi.Point2f(0.0), lam, mi.Bool(True), True, None,
+                                          self.features((s,))) for s in slots})
 
     def release_per_sample(self) -> None:
-        self._fixed = None
-
-    def fixed_for(self, lam) -> dict | None:
-        """slot -> the spectrum fixed for it at wavelengths ``lam``, or None."""
-        fixed = self._fixed
-        return fixed[2] if fixed is not None and fixed[1] == spec.wavelength_key(lam) else None
-
-    @contextlib.contextmanager
-    def fixed_as(self, lam, values: dict):
-        """Within the block, ``values`` (slot -> spectrum) are the spectra fixed at ``lam``:
-        the same spectra passed into a symbolic call (``LightSet``'s dispatch), where the
-        wavelengths and the values are the call's own variables."""
-        prev = self._fixed
-        self._fixed = (lam, spec.wavelength_key(lam), values)
-        try:
-            yield
-        finally:
-            self._fixed = prev
+        """Drop the emitter spectra :meth:`fix_per_sample` fixed (D65 stays)."""
+        spec.release()
 
     def _fixed_value(self, slot, lam, reach):
         """The value :meth:`fix_per_sample` fixed for ``slot`` (one of ``reach``) at
         wavelengths ``lam``, or None."""
-        vals = self.fixed_for(lam) if reach else None
+        vals = spec.fixed_for(lam) if reach else None
         if vals is None or not all(int(r) in vals for r in reach):
             return None
         reach = sorted(int(r) for r in reach)
@@ -483,7 +465,7 @@ class TextureSet:
         ``reach``: the slots ``slot`` can hold (Python ints), or None for any: only what
         those slots use is traced (:meth:`features`)."""
         slot = mi.UInt32(slot)
-        if illuminant and self._fixed is not None:
+        if illuminant:
             v = self._fixed_value(slot, lam, reach)
             if v is not None:
                 return v
