@@ -21,6 +21,8 @@ set -u
 #   PYTEST_ARGS what pytest runs (default: tests, and then the triage runs beside it)
 #   BENCHES     which benchmarks (default: cornell scenes optim volpath)
 #   SCENES_ARGS bench_scenes' scene choice (default --quick; empty: all 31), SCENES_S its limit (240 s)
+#   PROFILE_SCENES profile_kernels' scenes (default door,cornell,caustic: the scenes above 1.0x
+#               on the H200; registers by ptxas without Dr.Jit's enable_smem_spilling pragma)
 phases=${*:-tests bench}
 test_s=${TEST_S:-330}
 OUT=${OUT:-out/gpu}
@@ -70,14 +72,14 @@ for phase in $phases; do
     done ;;
   profile)
     bench profile_kernels 150 benchmarks/profile_kernels.py --res 1024 --spp 64 --reps 3 \
-      --scenes gallery,gallery-diffuse,cornell-glossy --ir-dir "$L/ir" ;;
+      --scenes ${PROFILE_SCENES:-door,cornell,caustic} --ir-dir "$L/ir" ;;
   esac
 done
 stamp "done"
 tar czf "$OUT/gpu_logs.tar.gz" -C "$OUT" logs
 echo "===== summary"
 cat "$L/env.txt"
-for f in "$L"/bench_*.txt "$L"/triage*.txt; do
+for f in "$L"/bench_*.txt "$L"/profile_*.txt "$L"/triage*.txt; do
   [ -f "$f" ] && { echo "== $(basename "$f")"; grep -v '^\s*$' "$f" | tail -n 14; }
 done
 if [ -f "$L/pytest.txt" ]; then
