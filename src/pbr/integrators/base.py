@@ -519,11 +519,11 @@ def emitted_mis(scene, sampler, light, si, d, wl, on_light, escaped, prev_p, pre
 def light_reaches(geo, si, p, contribution, em, skip_zero: bool = True):
     """Lanes of ``em`` where the light sample at ``p`` reaches ``si``: its unoccluded
     ``contribution`` (the estimate before the shadow ray) is nonzero and the segment to
-    ``p`` is free. As in pbrt-v4's ``SampleLd``, the BSDF is evaluated first and a shadow ray is
-    traced only where it would change the estimate: light behind the surface, on the
-    side of a one-sided BSDF that does not scatter, ... (Mitsuba traces every sampled
-    lane). Measured (64x64, 16 spp, max_depth 3, LLVM): shadow rays on ``door`` 121,928
-    -> 76,853, on the Cornell box 87,101 -> 73,863, the images unchanged.
+    ``p`` is free. As in pbrt-v4's ``SampleLd``, the BSDF is evaluated first and a shadow
+    ray is traced only where it can change the estimate (not toward a light behind the
+    surface, or on the side a one-sided BSDF does not scatter to; Mitsuba traces every
+    sampled lane). Measured (64x64, 16 spp, max_depth 3, LLVM): shadow rays on ``door``
+    121,928 -> 76,853, on the Cornell box 87,101 -> 73,863, the images unchanged.
     ``skip_zero=False`` (derivative passes) traces every lane of ``em``: a contribution
     of zero may have a nonzero derivative (a reflectance of 0 being optimised)."""
     if skip_zero:

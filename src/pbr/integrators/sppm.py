@@ -19,7 +19,7 @@ from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..samplers import IndependentSampler
 from ..sampling import power_heuristic
 from ..spectrum import SampledWavelengths, first_only
-from .base import INTEGRATORS, SamplingIntegrator, _progress, light_reaches, emitted_mis, mis_state, path_state
+from .base import INTEGRATORS, SamplingIntegrator, _progress, emitted_mis, light_reaches, mis_state, path_state
 from .lightpath import sample_importance, shading_correction, start_light_path
 
 UNLIMITED = 0xFFFFFFF0
