@@ -16,7 +16,6 @@ N_BUCKETS = 12
 UNROLL_DEPTH = 4
 MAX_DEPTH = 32
 LEAF_BIT = np.uint32(1 << 31)
-TWO_SIDED_BIT = np.uint32(1 << 30)
 INDEX_MASK = (1 << 30) - 1
 ONE_MINUS_EPS = float(np.nextafter(np.float32(1.0), np.float32(0.0)))
 
@@ -321,17 +320,18 @@ def _sin_sub(sin_a, cos_a, sin_b, cos_b):
     return dr.select(cos_a > cos_b, 0.0, sin_a * cos_b - cos_a * sin_b)
 
 
-def importance(p, n, has_n, A, B, C, two):
+def importance(p, n, has_n, A, B, C):
     """pbrt-v4's LightBounds importance of a node for the point ``p`` with normal ``n``
-    (ignored where ``has_n`` is False). A = (p_min, phi), B = (p_max, cos_o), C = (w, cos_e)."""
-    lo = mi.Vector3f(A.x, A.y, A.z)
-    hi = mi.Vector3f(B.x, B.y, B.z)
-    phi, cos_o, cos_e = A.w, B.w, C.w
-    w = mi.Vector3f(C.x, C.y, C.z)
-    pc = 0.5 * (lo + hi)
+    (ignored where ``has_n`` is False). What depends on the node alone is read from its
+    table row (:func:`node_rows`): A = (centre of the bounds, half their diagonal),
+    B = (w, phi), C = (cos_o, sin_o, cos_e, 1 if two-sided else 0)."""
+    pc = mi.Vector3f(A.x, A.y, A.z)
+    half_diag = A.w
+    w = mi.Vector3f(B.x, B.y, B.z)
+    phi = B.w
+    cos_o, sin_o, cos_e, two = C.x, C.y, C.z, C.w > 0
     v = p - pc
     dc2 = dr.squared_norm(v)
-    half_diag = 0.5 * dr.norm(hi - lo)
     # pbrt-v4 clamps the squared distance by half the box diagonal (a length).
     d2 = dr.maximum(dr.maximum(dc2, half_diag), 1e-30)
     wi = v * dr.select(dc2 > 0, dr.rsqrt(dc2), 0.0)
@@ -342,7 +342,6 @@ def importance(p, n, has_n, A, B, C, two):
     r2 = half_diag * half_diag
     cos_b = dr.select(dc2 < r2, -1.0, dr.safe_sqrt(1.0 - r2 / dr.maximum(dc2, 1e-30)))
     sin_b = dr.safe_sqrt(1.0 - cos_b * cos_b)
-    sin_o = dr.safe_sqrt(1.0 - cos_o * cos_o)
     cos_x = _cos_sub(sin_w, cos_w, sin_o, cos_o)
     sin_x = _sin_sub(sin_w, cos_w, sin_o, cos_o)
     cos_p = _cos_sub(sin_x, cos_x, sin_b, cos_b)
@@ -351,6 +350,22 @@ def importance(p, n, has_n, A, B, C, two):
     sin_i = dr.safe_sqrt(1.0 - cos_i * cos_i)
     imp = dr.select(has_n, imp * _cos_sub(sin_i, cos_i, sin_b, cos_b), imp)
     return dr.select(cos_p > cos_e, dr.maximum(imp, 0.0), 0.0)
+
+
+def node_rows(b: "LightBVH"):
+    """The three float32 rows per node that :func:`importance` reads (4 floats each):
+    what depends on the node alone is computed here once, not at every visit of a
+    descent (the centre and half diagonal of the bounds, sin theta_o)."""
+    f32 = np.float32
+    lo, hi = b.p_min.astype(f32), b.p_max.astype(f32)
+    centre = f32(0.5) * (lo + hi)
+    half_diag = f32(0.5) * np.sqrt(np.sum(np.square(hi - lo), axis=1, dtype=f32))
+    cos_o = b.cos_o.astype(f32)
+    sin_o = np.sqrt(np.maximum(f32(1.0) - cos_o * cos_o, f32(0.0)))
+    A = np.column_stack([centre, half_diag])
+    B = np.column_stack([b.w, b.phi])
+    C = np.column_stack([cos_o, sin_o, b.cos_e, b.two.astype(f32)])
+    return [x.astype(f32).ravel() for x in (A, B, C)]
 
 
 class BVHLightSampler:
@@ -385,12 +400,8 @@ class BVHLightSampler:
             self.n_nodes = bvh.n_nodes
             word = np.where(bvh.leaf, ids[np.where(bvh.leaf, bvh.child, 0)], bvh.child).astype(np.uint32)
             word |= np.where(bvh.leaf, LEAF_BIT, 0).astype(np.uint32)
-            word |= np.where(bvh.two, TWO_SIDED_BIT, 0).astype(np.uint32)
             self.root_word = int(word[0])
-            f32 = np.float32
-            self._A = mi.Float(np.column_stack([bvh.p_min, bvh.phi]).astype(f32).ravel())
-            self._B = mi.Float(np.column_stack([bvh.p_max, bvh.cos_o]).astype(f32).ravel())
-            self._C = mi.Float(np.column_stack([bvh.w, bvh.cos_e]).astype(f32).ravel())
+            self._A, self._B, self._C = (mi.Float(r) for r in node_rows(bvh))
             self._word = mi.UInt32(word)
             trail = np.zeros(self.n, np.uint64)
             trail[ids] = bvh.trail
@@ -403,8 +414,7 @@ class BVHLightSampler:
         A = dr.gather(mi.Vector4f, self._A, node, active)
         B = dr.gather(mi.Vector4f, self._B, node, active)
         C = dr.gather(mi.Vector4f, self._C, node, active)
-        two = (dr.gather(mi.UInt32, self._word, node, active) & int(TWO_SIDED_BIT)) != 0
-        return importance(p, n, has_n, A, B, C, two)
+        return importance(p, n, has_n, A, B, C)
 
     def _step(self, word, p, n, has_n, active):
         c0 = word & INDEX_MASK
