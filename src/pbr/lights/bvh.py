@@ -334,14 +334,16 @@ def importance(p, n, has_n, A, B, C):
     dc2 = dr.squared_norm(v)
     # pbrt-v4 clamps the squared distance by half the box diagonal (a length).
     d2 = dr.maximum(dr.maximum(dc2, half_diag), 1e-30)
-    wi = v * dr.select(dc2 > 0, dr.rsqrt(dc2), 0.0)
+    inv_dc = dr.select(dc2 > 0, dr.rsqrt(dc2), 0.0)
+    wi = v * inv_dc
     cos_w = dr.dot(w, wi)
     cos_w = dr.select(two, dr.abs(cos_w), cos_w)
     sin_w = dr.safe_sqrt(1.0 - cos_w * cos_w)
     # Directions from p subtended by the box's bounding sphere.
-    r2 = half_diag * half_diag
-    cos_b = dr.select(dc2 < r2, -1.0, dr.safe_sqrt(1.0 - r2 / dr.maximum(dc2, 1e-30)))
-    sin_b = dr.safe_sqrt(1.0 - cos_b * cos_b)
+    # (sin theta_b = r / |v| outside the sphere: no division, one square root fewer)
+    inside = dc2 < half_diag * half_diag
+    sin_b = dr.select(inside, 0.0, dr.minimum(half_diag * inv_dc, 1.0))
+    cos_b = dr.select(inside, -1.0, dr.safe_sqrt(1.0 - sin_b * sin_b))
     cos_x = _cos_sub(sin_w, cos_w, sin_o, cos_o)
     sin_x = _sin_sub(sin_w, cos_w, sin_o, cos_o)
     cos_p = _cos_sub(sin_x, cos_x, sin_b, cos_b)
