@@ -324,12 +324,12 @@ def importance(p, n, has_n, A, B, C):
     """pbrt-v4's LightBounds importance of a node for the point ``p`` with normal ``n``
     (ignored where ``has_n`` is False). What depends on the node alone is read from its
     table row (:func:`node_rows`): A = (centre of the bounds, half their diagonal),
-    B = (w, phi), C = (cos_o, sin_o, cos_e, 1 if two-sided else 0)."""
+    B = (w, phi, negative if two-sided), C = (cos_o, sin_o, cos_e, the node's word)."""
     pc = mi.Vector3f(A.x, A.y, A.z)
     half_diag = A.w
     w = mi.Vector3f(B.x, B.y, B.z)
-    phi = B.w
-    cos_o, sin_o, cos_e, two = C.x, C.y, C.z, C.w > 0
+    phi, two = dr.abs(B.w), B.w < 0
+    cos_o, sin_o, cos_e = C.x, C.y, C.z
     v = p - pc
     dc2 = dr.squared_norm(v)
     # pbrt-v4 clamps the squared distance by half the box diagonal (a length).
@@ -354,20 +354,24 @@ def importance(p, n, has_n, A, B, C):
     return dr.select(cos_p > cos_e, dr.maximum(imp, 0.0), 0.0)
 
 
-def node_rows(b: "LightBVH"):
+def node_rows(b: "LightBVH", word: np.ndarray):
     """The three float32 rows per node that :func:`importance` reads (4 floats each):
     what depends on the node alone is computed here once, not at every visit of a
-    descent (the centre and half diagonal of the bounds, sin theta_o)."""
+    descent (the centre and half diagonal of the bounds, sin theta_o). The two-sided
+    flag is phi's sign (a node of zero power has importance 0 either way), and the
+    node's ``word`` (its bits) rides in the last slot: a descent that has read both
+    children's rows knows the chosen child's word without another gather."""
     f32 = np.float32
     lo, hi = b.p_min.astype(f32), b.p_max.astype(f32)
     centre = f32(0.5) * (lo + hi)
     half_diag = f32(0.5) * np.sqrt(np.sum(np.square(hi - lo), axis=1, dtype=f32))
     cos_o = b.cos_o.astype(f32)
     sin_o = np.sqrt(np.maximum(f32(1.0) - cos_o * cos_o, f32(0.0)))
-    A = np.column_stack([centre, half_diag])
-    B = np.column_stack([b.w, b.phi])
-    C = np.column_stack([cos_o, sin_o, b.cos_e, b.two.astype(f32)])
-    return [x.astype(f32).ravel() for x in (A, B, C)]
+    A = np.column_stack([centre, half_diag]).astype(f32)
+    B = np.column_stack([b.w, np.where(b.two, -b.phi, b.phi)]).astype(f32)
+    C = np.column_stack([cos_o, sin_o, b.cos_e, np.zeros(len(cos_o))]).astype(f32)
+    C[:, 3] = np.asarray(word, np.uint32).view(f32)
+    return [x.ravel() for x in (A, B, C)]
 
 
 class BVHLightSampler:
@@ -403,8 +407,7 @@ class BVHLightSampler:
             word = np.where(bvh.leaf, ids[np.where(bvh.leaf, bvh.child, 0)], bvh.child).astype(np.uint32)
             word |= np.where(bvh.leaf, LEAF_BIT, 0).astype(np.uint32)
             self.root_word = int(word[0])
-            self._A, self._B, self._C = (mi.Float(r) for r in node_rows(bvh))
-            self._word = mi.UInt32(word)
+            self._A, self._B, self._C = (mi.Float(r) for r in node_rows(bvh, word))
             trail = np.zeros(self.n, np.uint64)
             trail[ids] = bvh.trail
             if np.any(trail >> np.uint64(32)):
@@ -413,16 +416,18 @@ class BVHLightSampler:
 
     # -- node access ----------------------------------------------------------------------
     def _importance(self, node, p, n, has_n, active):
+        """(importance of ``node`` at p, the node's word)."""
         A = dr.gather(mi.Vector4f, self._A, node, active)
         B = dr.gather(mi.Vector4f, self._B, node, active)
         C = dr.gather(mi.Vector4f, self._C, node, active)
-        return importance(p, n, has_n, A, B, C)
+        return importance(p, n, has_n, A, B, C), dr.reinterpret_array(mi.UInt32, C.w)
 
     def _step(self, word, p, n, has_n, active):
+        """The children of inner node ``word``: their importances, words and total."""
         c0 = word & INDEX_MASK
-        i0 = self._importance(c0, p, n, has_n, active)
-        i1 = self._importance(c0 + 1, p, n, has_n, active)
-        return c0, i0, i1, i0 + i1
+        i0, w0 = self._importance(c0, p, n, has_n, active)
+        i1, w1 = self._importance(c0 + 1, p, n, has_n, active)
+        return i0, i1, w0, w1, i0 + i1
 
     def _loop(self, state, cond, body, labels, label):
         """The descent from the root: a symbolic loop, or for a shallow tree (at most
@@ -455,7 +460,7 @@ class BVHLightSampler:
         p, n = mi.Point3f(ref_p), mi.Normal3f(ref_n)
         has_n = dr.squared_norm(n) > 0
         if self.n_nodes == 1:
-            i = self._importance(mi.UInt32(0), p, n, has_n, tree)
+            i = self._importance(mi.UInt32(0), p, n, has_n, tree)[0]
             ok = tree & (i > 0)
             light = dr.select(ok, self.root_word & INDEX_MASK, light)
             return light, dr.select(ok, 1.0 - self.p_inf, dr.select(tree, 0.0, pmf))
@@ -472,15 +477,14 @@ class BVHLightSampler:
             return alive
 
         def body(word, q, u, alive):
-            c0, i0, i1, tot = self._step(word, p, n, has_n, alive)
+            i0, i1, w0, w1, tot = self._step(word, p, n, has_n, alive)
             t = u * tot
             left = (t < i0) | (i1 == 0)
             dead = ~(tot > 0)
             u = dr.select(left, t / i0, (t - i0) / i1)
             u = dr.clip(u, 0.0, ONE_MINUS_EPS)
             q = dr.select(dead, 0.0, q * (dr.select(left, i0, i1) / tot))
-            node = dr.select(left, c0, c0 + 1)
-            word = dr.select(alive, dr.gather(mi.UInt32, self._word, node, alive), word)
+            word = dr.select(alive, dr.select(left, w0, w1), word)
             alive = alive & ~dead & ((word & int(LEAF_BIT)) == 0)
             return word, q, u, alive
 
@@ -503,7 +507,7 @@ class BVHLightSampler:
         p, n = mi.Point3f(ref_p), mi.Normal3f(ref_n)
         has_n = dr.squared_norm(n) > 0
         if self.n_nodes == 1:
-            i = self._importance(mi.UInt32(0), p, n, has_n, tree)
+            i = self._importance(mi.UInt32(0), p, n, has_n, tree)[0]
             return dr.select(tree & (i > 0), 1.0 - self.p_inf, out)
         trail = dr.gather(mi.UInt32, self._trail, light, tree)
 
@@ -511,12 +515,11 @@ class BVHLightSampler:
             return alive
 
         def body(word, q, trail, alive):
-            c0, i0, i1, tot = self._step(word, p, n, has_n, alive)
+            i0, i1, w0, w1, tot = self._step(word, p, n, has_n, alive)
             right = (trail & 1) == 1
             dead = ~(tot > 0)
             q = dr.select(dead, 0.0, q * (dr.select(right, i1, i0) / tot))
-            node = dr.select(right, c0 + 1, c0)
-            word = dr.select(alive, dr.gather(mi.UInt32, self._word, node, alive), word)
+            word = dr.select(alive, dr.select(right, w1, w0), word)
             alive = alive & (q > 0) & ((word & int(LEAF_BIT)) == 0)
             return word, q, trail >> 1, alive
 
