@@ -1,7 +1,8 @@
 """Where a render's time goes, pbr next to Mitsuba 3 on the same scene: the kernels each
 launches (Dr.Jit's kernel history: operations, execution time, compile time), with
 ``--ir-dir`` their IR written out and, on CUDA with ``ptxas`` on the PATH, each PTX
-kernel's registers, stack frame and spill bytes; then pbr's time under changed Dr.Jit
+kernel's registers, stack frame and spill bytes (on LLVM, the float vectors live across
+each ray-tracing call: ``ir_liveness.py``); then pbr's time under changed Dr.Jit
 flags (symbolic calls off, call optimisation off, ...), and the gallery with every
 sphere diffuse (``gallery-diffuse``: the cost of mixing 16 BSDF families in one warp).
 Run it where the time is lost: on CUDA the gallery took 4.8x Mitsuba's time on an H100
@@ -47,6 +48,7 @@ import drjit as dr
 import mitsuba as mi
 
 from bench_scenes import scene_dicts, interleaved_cpu
+from ir_liveness import trace_liveness
 from pbr.scene.xml import to_xml
 
 
@@ -241,6 +243,10 @@ def report(name: str, who: str, t: float, h: list, ir_dir: str | None, run_ms: f
             line += f", IR -> {path}"
             if ext == "ptx":
                 line += f"; {ptxas_info(path)}"
+        if "ir" in k and pbr.get_backend() == "llvm":
+            live = trace_liveness(k["ir"].getvalue())
+            if live:
+                line += "; float vectors live across " + ", ".join(f"{t.kind} {t.live['float']}" for t in live)
         print(line)
 
 

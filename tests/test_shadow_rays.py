@@ -76,20 +76,16 @@ def test_light_paths_connect_only_where_both_ends_scatter(monkeypatch, integrato
     assert np.array_equal(img_skip, img_all) and img_skip.max() == 0.0
 
 
-def test_blocked_or_not_the_image_is_unchanged():
+def test_blocked_or_not_the_image_is_unchanged(monkeypatch):
     """Only lanes whose estimate is zero go without a shadow ray: the same scene rendered
-    with every light sample tested (``skip_zero=False``) gives the same image, bit for bit."""
-    from pbr.integrators import base, path
+    with every light sample tested (``nonzero_estimate`` passing every sampled lane) gives
+    the same image, bit for bit."""
+    from pbr.integrators import path
     d = pbr.cornell_box(16, 8)
     d["integrator"] = {"type": "path", "max_depth": 4}
-    scene = pbr.load_dict(d)
-    n_skip, img_skip = _count_shadow_lanes(scene)
-    orig = base.light_reaches
-    path.light_reaches = lambda *a, **k: orig(*a, **{**k, "skip_zero": False})
-    try:
-        n_all, img_all = _count_shadow_lanes(pbr.load_dict(d))
-    finally:
-        path.light_reaches = orig
+    n_skip, img_skip = _count_shadow_lanes(pbr.load_dict(d))
+    monkeypatch.setattr(path, "nonzero_estimate", lambda contribution, em: em)
+    n_all, img_all = _count_shadow_lanes(pbr.load_dict(d))
     print(f"Cornell box: shadow-ray lanes {n_skip} (every sampled lane: {n_all})")
     assert n_skip < 0.95 * n_all
     assert np.array_equal(img_skip, img_all)

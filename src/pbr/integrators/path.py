@@ -23,7 +23,7 @@ from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
 from ..spectrum import first_only
 from .base import (INTEGRATORS, BACKWARD, PRIMAL, SamplingIntegrator, depth_limit, emitted_mis, forward_derivative,
-                   light_reaches, loop_ray, mis_state, path_state, ray_state)
+                   light_reaches, loop_ray, nonzero_estimate, mis_state, path_state, ray_state)
 
 
 def face_the_ray(si, ray, mask):
@@ -211,22 +211,28 @@ class PathIntegrator(SamplingIntegrator):
                 # is another random estimate than the sample's weight: there too the
                 # sample's own weight is differentiated (its pdf is detached).
                 f_sampled = bs.weight * bs.pdf
-            em = light_reaches(geo, si, ls.p, Ld, em, skip_zero=primal)
-            with dr.resume_grad(when=not primal):
-                Ld = dr.select(em, Ld, 0.0)
+            if dr.hint(primal, mode="scalar"):
+                # The shadow ray is traced at the end of the body (below): there fewer
+                # values are live across the trace (door's LLVM IR: 64 float vectors
+                # instead of 72), each of which OptiX keeps on its stack during a trace.
+                em = nonzero_estimate(Ld, em)
+                shadow_ray = si.spawn_ray_to(ls.p)
+            else:
+                em = light_reaches(geo, si, ls.p, Ld, em, skip_zero=False)
+                with dr.resume_grad():
+                    Ld = dr.select(em, Ld, 0.0)
             replay_sample = bs.delta | bsdfs.stochastic(bsdf_id, active_next)
             bs = dr.detach(bs)
             seen |= hit & ~skip & ~bs.null
             cont = active_next & (bs.pdf > 0)
 
             if dr.hint(primal, mode="scalar"):
-                L = L + Le + Ld
+                L = L + Le
                 if dr.hint(dispersive, mode="scalar"):
                     # Wavelength-dependent refraction: only the first wavelength goes on,
                     # standing for all four (pbrt-v4's TerminateSecondary, applied to the
                     # radiance and throughput instead of the wavelength densities).
                     term = hit & bs.terminate & ~terminated
-                    L[term] = first_only(L)
                     beta[term] = first_only(beta)
                     terminated |= term
             else:
@@ -255,6 +261,15 @@ class PathIntegrator(SamplingIntegrator):
                 nonspecular |= cont & ~bs.delta
             ray = dr.select(skip, si.spawn_ray(ray.d), si.spawn_ray(si.to_world(bs.wo)))
             ray_var = ray_state(ray)[0]
+            if dr.hint(primal, mode="scalar"):
+                # A new scope: Dr.Jit schedules a kernel's operations by scope, then
+                # depth-first from the loop state; without it the trace is emitted where
+                # the depth-first walk first needs it (right after the light sample).
+                dr.detail.new_scope(dr.backend_v(L))
+                em &= ~geo.occluded(shadow_ray, em)
+                L = L + dr.select(em, Ld, 0.0)
+                if dr.hint(dispersive, mode="scalar"):
+                    L[term] = first_only(L)
             depth[hit & ~skip] = depth + 1
 
             # Russian roulette (the survival probability is detached, as in Mitsuba).

@@ -1,0 +1,118 @@
+"""benchmarks/ir_liveness.py (values live across a kernel's ray-tracing calls) and the
+path tracer's kernel layout it measures: the shadow ray is traced after the path's next
+ray is built, where fewer values are live across the trace (docs/performance.md)."""
+
+import os
+import re
+import sys
+
+import drjit as dr
+import pytest
+
+import pbr
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "benchmarks"))
+import ir_liveness  # noqa: E402
+
+SMALL = """
+define void @drjit_0(i64 %start, i64 %end, i32 %thread_id, ptr noalias %params) #0 {
+entry:
+    %rd1 = load ptr, ptr %params, align 8
+    %buffer = alloca i8, i32 64, align 64
+    br label %l_2_cond
+
+l_2_cond:
+    %f2 = phi <16 x float> [ zeroinitializer, %entry ], [ %f6, %l_2_body ]
+    %p3 = fcmp olt <16 x float> %f2, zeroinitializer
+    %b3 = call i1 @llvm.vector.reduce.or.v16i1(<16 x i1> %p3)
+    br i1 %b3, label %l_2_body, label %l_2_done
+
+l_2_body:
+    %f4 = fadd <16 x float> %f2, %f2
+    %f5 = fmul <16 x float> %f2, %f2
+
+    ; -------- Ray test -------
+    %u7_in_0_1 = getelementptr inbounds i8, ptr %buffer, i32 0
+    store <16 x float> %f5, ptr %u7_in_0_1, align 64
+    call void %rd1(ptr %u7_in_0_1, ptr %rd1, ptr %u7_in_0_1, ptr %u7_in_0_1)
+    %f6 = fadd <16 x float> %f4, %f2
+    br label %l_2_cond
+
+l_2_done:
+    ret void
+}
+"""
+
+
+def test_liveness_of_a_small_loop():
+    """Across the call: %f2 and %f4 (used after it), %rd1 and %buffer (used by the next
+    iteration); not %f5 (last used before it), %f6 (defined after it) or the mask %p3."""
+    (t,) = ir_liveness.trace_liveness(SMALL)
+    assert t.kind == "test" and t.block == "l_2_body"
+    assert t.live["float"] == 2 and t.live["mask"] == 0
+    assert t.live["scalar"] == 2                       # %rd1 and %buffer
+
+
+def test_no_kernel_is_an_error():
+    with pytest.raises(ValueError, match="no Dr.Jit kernel"):
+        ir_liveness.trace_liveness("define void @f() {\n}\n")
+
+
+def _calls(k):
+    """(position, 'trace'/'test', {input slot: stored value}) of each Embree call."""
+    out, n = [], 0
+    for instrs in k.blocks.values():
+        for j, i in enumerate(instrs):
+            if re.match(r"^call void %rd\d+\(", i.text):
+                stores = {}
+                for x in reversed(instrs[:j]):
+                    m = re.match(r"store <16 x \w+> (%[\w.]+), ptr %u\d+_in_(\d+)_1", x.text)
+                    if m:
+                        stores.setdefault(int(m.group(2)), m.group(1))
+                    if x.comment:
+                        break
+                out.append((n, "test" if "Ray test" in x.comment else "trace", stores))
+            n += 1
+    return out
+
+
+@pytest.mark.skipif(pbr.get_backend() != "llvm", reason="reads the LLVM IR of the path kernel")
+def test_path_traces_the_shadow_ray_after_the_next_ray():
+    """In the path tracer's megakernel the shadow ray (Embree's occlusion call) comes after
+    the direction of the path's next ray is computed: the next-iteration values of the
+    closest-hit call's direction inputs are defined before the shadow-ray call. With the
+    trace where the depth-first schedule puts it (right after the light sample, before
+    the BSDF is sampled) this fails, and 8 more float vectors are live across it."""
+    d = pbr.cornell_box(16, 4)
+    d["integrator"] = {"type": "path", "max_depth": 4}
+    scene = pbr.load_dict(d)
+    dr.kernel_history()
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        pbr.render(scene, spp=4, seed=0, progress=False)
+        h = dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    jit = [k for k in h if k["type"] == dr.KernelType.JIT and "ir" in k]
+    ir = max(jit, key=lambda k: k.get("operation_count", 0))["ir"].getvalue()
+    k = ir_liveness.parse(ir)
+    pos, defs, n = {}, {}, 0
+    for instrs in k.blocks.values():
+        for i in instrs:
+            if i.defines:
+                pos[i.defines], defs[i.defines] = n, i
+            n += 1
+    calls = _calls(k)
+    (trace,) = [c for c in calls if c[1] == "trace"]
+    (test,) = [c for c in calls if c[1] == "test"]
+    for slot in (5, 6, 7):                              # the ray direction's x, y, z
+        phi = defs[trace[2][slot]]
+        assert phi.incoming, f"the closest-hit call's direction {trace[2][slot]} is not a loop variable"
+        nxt = [v for v, b in phi.incoming if not b.endswith("_before")][0]
+        # the loop keeps finished lanes' values: select(active, new value, old value)
+        m = re.match(r"%[\w.]+ = select <16 x i1> %[\w.]+, <16 x float> (%[\w.]+),", defs[nxt].text)
+        new = m.group(1) if m else nxt
+        assert pos[new] < test[0], f"the next ray's direction ({new}) is computed after the shadow-ray call"
+    live = {t.kind: t.live for t in ir_liveness.trace_liveness(ir)}
+    print(f"float vectors live across the closest-hit call {live['trace']['float']}, "
+          f"the shadow-ray call {live['test']['float']}")
