@@ -23,6 +23,8 @@ set -u
 #   SCENES_ARGS bench_scenes' scene choice (default --quick; empty: all 31), SCENES_S its limit (240 s)
 #   PROFILE_SCENES profile_kernels' scenes (default door,cornell,caustic: the scenes above 1.0x
 #               on the H200; registers by ptxas without Dr.Jit's enable_smem_spilling pragma)
+#   PROFILE_ABLATE its --ablate changes (default gathered-area-light: whether the 13 light
+#               values live across every trace of a one-light scene cost time on the GPU)
 phases=${*:-tests bench}
 test_s=${TEST_S:-330}
 OUT=${OUT:-out/gpu}
@@ -72,7 +74,7 @@ for phase in $phases; do
     done ;;
   profile)
     bench profile_kernels 150 benchmarks/profile_kernels.py --res 1024 --spp 64 --reps 3 \
-      --scenes ${PROFILE_SCENES:-door,cornell,caustic} --ir-dir "$L/ir" ;;
+      --scenes ${PROFILE_SCENES:-door,cornell,caustic} --ir-dir "$L/ir" --ablate ${PROFILE_ABLATE:-gathered-area-light} ;;
   esac
 done
 stamp "done"

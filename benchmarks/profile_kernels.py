@@ -22,7 +22,9 @@ more in pbr than in Mitsuba is where pbr loses time. Changes: ``uniform-lights``
 ``constant-textures`` (every checkerboard replaced by its first colour),
 ``box-filter`` (film filter box instead of Gaussian), ``diffuse-only`` (every BSDF a
 grey diffuse one: the cost of the scene's BSDF families and their dispatch),
-``no-nee`` (``path`` without emitter sampling is not in Mitsuba: skipped).
+``no-nee`` (``path`` without emitter sampling is not in Mitsuba: skipped),
+``gathered-area-light`` (pbr only: a one-light scene's light tables gathered where
+used instead of loaded before the path loop, which keeps them live across every trace).
 
 ``--freeze``: per-call time of ``pbr.render`` and of the same call under ``pbr.freeze``
 (no Python tracing once recorded) next to ``mi.render``, at the scene's resolution.
@@ -88,9 +90,31 @@ def _uniform_lights(d):
     return d
 
 
-# name -> (change to the dict, whether Mitsuba has it)
-ABLATIONS = {"uniform-lights": (_uniform_lights, False), "constant-textures": (_constant_textures, True),
-             "box-filter": (_box_filter, True), "diffuse-only": (_diffuse_only, True)}
+def _gathered_area_light(scene):
+    """pbr only, on its loaded scene: a scene with one area light gets that light's tables
+    twice (the same light, still light 0), so the kernel gathers its corners, normal and
+    area where it samples the light instead of loading them once before the path loop:
+    13 float vectors that are otherwise live across every trace (``ir_liveness.py``)."""
+    a = scene.lights.families.get("area")
+    if a is None or a.n_sub != 1:
+        raise ValueError("not a scene with one area light")
+    two = mi.UInt32(0, 0)
+
+    def dup(x):
+        if isinstance(x, list):
+            return [dup(y) for y in x]
+        if dr.is_array_v(x) and dr.width(x) == 1:
+            return dr.gather(type(x), x, two)
+        return x
+    for k, v in list(vars(a).items()):
+        vars(a)[k] = dup(v)
+    return scene
+
+
+# name -> (change to the dict, whether Mitsuba has it, change to pbr's loaded scene)
+ABLATIONS = {"uniform-lights": (_uniform_lights, False, None), "constant-textures": (_constant_textures, True, None),
+             "box-filter": (_box_filter, True, None), "diffuse-only": (_diffuse_only, True, None),
+             "gathered-area-light": (lambda d: d, False, _gathered_area_light)}
 BSDF_TYPES = ()
 
 
@@ -101,8 +125,10 @@ def _copy(d):
 
 def ablate(name, d, spp, reps, changes):
     """Print, for each change, pbr's and Mitsuba's time ratio changed/default."""
-    def runners(dd, dm):
+    def runners(dd, dm, scene_fn=None):
         sc, ms = pbr.load_dict(dd), mi.load_string(to_xml(dm))
+        if scene_fn is not None:
+            sc = scene_fn(sc)
         seed = [100]
 
         def rp():
@@ -118,10 +144,10 @@ def ablate(name, d, spp, reps, changes):
 
     base_p, base_m = runners(d, d)
     for ch in changes:
-        fn, in_mi = ABLATIONS[ch]
+        fn, in_mi, scene_fn = ABLATIONS[ch]
         try:
             alt = fn(_copy(d))
-            alt_p, alt_m = runners(alt, alt if in_mi else d)
+            alt_p, alt_m = runners(alt, alt if in_mi else d, scene_fn)
         except Exception as e:   # a change that does not apply to this scene
             print(f"  ablate {ch:18s} not applicable: {str(e).splitlines()[0][:120]}")
             continue

@@ -7,6 +7,7 @@ import re
 import sys
 
 import drjit as dr
+import numpy as np
 import pytest
 
 import pbr
@@ -116,3 +117,41 @@ def test_path_traces_the_shadow_ray_after_the_next_ray():
     live = {t.kind: t.live for t in ir_liveness.trace_liveness(ir)}
     print(f"float vectors live across the closest-hit call {live['trace']['float']}, "
           f"the shadow-ray call {live['test']['float']}")
+
+
+def _kernel_ir(scene, spp=4):
+    dr.kernel_history()
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        img = np.asarray(pbr.render(scene, spp=spp, seed=0, progress=False))
+        h = dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    jit = [k for k in h if k["type"] == dr.KernelType.JIT and "ir" in k]
+    return img, max(jit, key=lambda k: k.get("operation_count", 0))["ir"].getvalue()
+
+
+@pytest.mark.skipif(pbr.get_backend() != "llvm", reason="reads the LLVM IR of the path kernel")
+def test_gathered_area_light_ablation():
+    """profile_kernels' ``gathered-area-light``: the Cornell box's one light, its tables
+    doubled, renders the same image bit for bit, and its 13 values (3 corners, the normal,
+    the area) are no longer live across the closest-hit call."""
+    import profile_kernels
+    d = pbr.cornell_box(16, 4)
+    d["integrator"] = {"type": "path", "max_depth": 4}
+    img0, ir0 = _kernel_ir(pbr.load_dict(d))
+    img1, ir1 = _kernel_ir(profile_kernels._gathered_area_light(pbr.load_dict(d)))
+    assert np.array_equal(img0, img1) and img0.mean() > 0.01
+    f0 = [t.live["float"] for t in ir_liveness.trace_liveness(ir0)]
+    f1 = [t.live["float"] for t in ir_liveness.trace_liveness(ir1)]
+    print(f"float vectors live across the traces: {f0} -> {f1}")
+    assert [a - b for a, b in zip(f0, f1)] == [13, 13]
+    with pytest.raises(ValueError, match="one area light"):
+        profile_kernels._gathered_area_light(pbr.load_dict(_no_area_light()))
+
+
+def _no_area_light():
+    return {"type": "scene", "integrator": {"type": "path"},
+            "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 8, "height": 8}},
+            "light": {"type": "point", "position": [0, 0, 2], "intensity": 1.0},
+            "floor": {"type": "rectangle", "bsdf": {"type": "diffuse"}}}
