@@ -73,7 +73,7 @@ for phase in $phases; do
       esac
     done ;;
   profile)
-    bench profile_kernels 150 benchmarks/profile_kernels.py --res 1024 --spp 64 --reps 3 \
+    bench profile_kernels 200 benchmarks/profile_kernels.py --res 1024 --spp 64 --reps 3 \
       --scenes ${PROFILE_SCENES:-door,cornell,caustic} --ir-dir "$L/ir" --ablate ${PROFILE_ABLATE:-gathered-area-light} ;;
   esac
 done

@@ -152,7 +152,10 @@ def ablate(name, d, spp, reps, changes):
             print(f"  ablate {ch:18s} not applicable: {str(e).splitlines()[0][:120]}")
             continue
         *_, rp_wall, _, _, rp = interleaved_cpu(alt_p, base_p, reps)
-        line = f"  ablate {ch:18s} pbr {rp:5.2f}x (wall {rp_wall:5.2f}x)"
+        # kernel time too: on CUDA the process CPU time does not contain the GPU's work
+        rk = np.median([kernel_ms(history(alt_p)[1]) / max(kernel_ms(history(base_p)[1]), 1e-9)
+                        for _ in range(reps)])
+        line = f"  ablate {ch:18s} pbr {rp:5.2f}x (wall {rp_wall:5.2f}x, kernels {rk:5.2f}x)"
         if in_mi:
             *_, rm_wall, _, _, rm = interleaved_cpu(alt_m, base_m, reps)
             line += f"   Mitsuba {rm:5.2f}x (wall {rm_wall:5.2f}x)"
