@@ -213,8 +213,8 @@ class PathIntegrator(SamplingIntegrator):
                 f_sampled = bs.weight * bs.pdf
             if dr.hint(primal, mode="scalar"):
                 # The shadow ray is traced at the end of the body (below): there fewer
-                # values are live across the trace (door's LLVM IR: 64 float vectors
-                # instead of 72), each of which OptiX keeps on its stack during a trace.
+                # values are live across the trace, which must preserve each of them
+                # (door's LLVM IR: 64 float vectors instead of 72; docs/performance.md).
                 em = nonzero_estimate(Ld, em)
                 shadow_ray = si.spawn_ray_to(ls.p)
             else:
