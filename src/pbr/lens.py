@@ -97,20 +97,7 @@ class LensSystem:
         z = 0.0
         for i in range(len(self.radius) - 1, -1, -1):
             z -= self.thickness[i]
-            if self.radius[i] == 0.0:
-                t = (z - o.z) / d.z
-                ok &= t >= 0.0
-            else:
-                t, n, hit = _sphere_hit(self.radius[i], z + self.radius[i], o, d)
-                ok &= hit
-            p = o + d * t
-            ok &= p.x * p.x + p.y * p.y <= self.aperture[i] ** 2
-            o = mi.Point3f(p)
-            if self.radius[i] != 0.0:
-                eta_i = self.eta[i] if self.eta[i] != 0.0 else 1.0
-                w, r_ok = _refract(dr.normalize(-d), n, self._medium(i - 1) / eta_i)
-                ok &= r_ok
-                d = w
+            o, d, ok = self._element(i, z, o, d, ok, self._medium(i - 1) / self._medium(i))
         return mi.Point3f(o.x, o.y, -o.z), mi.Vector3f(d.x, d.y, -d.z), ok
 
     def trace_from_scene(self, o, d, active=True):
@@ -121,23 +108,27 @@ class LensSystem:
         ok = mi.Bool(active)
         z = -self.front_z
         for i in range(len(self.radius)):
-            if self.radius[i] == 0.0:
-                t = (z - o.z) / d.z
-                ok &= t >= 0.0
-            else:
-                t, n, hit = _sphere_hit(self.radius[i], z + self.radius[i], o, d)
-                ok &= hit
-            p = o + d * t
-            ok &= p.x * p.x + p.y * p.y <= self.aperture[i] ** 2
-            o = mi.Point3f(p)
-            if self.radius[i] != 0.0:
-                eta_i = self._medium(i - 1)
-                eta_t = self.eta[i] if self.eta[i] != 0.0 else 1.0
-                w, r_ok = _refract(dr.normalize(-d), n, eta_t / eta_i)
-                ok &= r_ok
-                d = w
+            o, d, ok = self._element(i, z, o, d, ok, self._medium(i) / self._medium(i - 1))
             z += self.thickness[i]
         return mi.Point3f(o.x, o.y, -o.z), mi.Vector3f(d.x, d.y, -d.z), ok
+
+    def _element(self, i, z, o, d, ok, eta):
+        """The ray (o, d) across element ``i``, its vertex at ``z``: the point where it
+        meets the element, its direction after it (refracted with relative IOR ``eta``
+        by a curved element; an aperture stop keeps it) and ``ok`` cleared where it
+        misses the element or its aperture or is totally reflected."""
+        if self.radius[i] == 0.0:
+            t = (z - o.z) / d.z
+            ok &= t >= 0.0
+        else:
+            t, n, hit = _sphere_hit(self.radius[i], z + self.radius[i], o, d)
+            ok &= hit
+        p = o + d * t
+        ok &= p.x * p.x + p.y * p.y <= self.aperture[i] ** 2
+        if self.radius[i] != 0.0:
+            d, r_ok = _refract(dr.normalize(-d), n, eta)
+            ok &= r_ok
+        return mi.Point3f(p), d, ok
 
     # -- set-up (host side) -------------------------------------------------------------
     def _one(self, fn, o, d):
