@@ -53,6 +53,26 @@ def hit_emission(scene, si, shape, wl, active):
     return lights.L(light - 1, si, wl, hit & (light > 0)), dr.select(hit, light, 0)
 
 
+def add_unweighted_emission(L, scene, si, shape, ray, wl, active, hit, depth, beta, hide_emitters, count=None):
+    """``L`` plus what pbrt-v4's RandomWalk and SimplePath count at a vertex, without MIS:
+    ``beta`` times the radiance of the emitter hit and, for rays that left the scene, of
+    the infinite lights, on ``count`` lanes (all by default). With ``hide_emitters``
+    camera rays pass through emitters and do not see the environment. Returns (L, the
+    lanes passing through an emitter)."""
+    lights = scene.lights
+    count = mi.Bool(True) if count is None else count
+    Le, light = hit_emission(scene, si, shape, wl, hit)
+    skip = hit & (light > 0) & (depth == 0) if hide_emitters else mi.Bool(False)
+    L += dr.select(count & ~skip, beta * Le, 0.0)
+    if lights.has_infinite:
+        escaped = active & ~hit & count
+        if hide_emitters:
+            escaped &= depth > 0
+        for Le_inf, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), escaped):
+            L += dr.select(escaped, beta * Le_inf, 0.0)
+    return L, skip
+
+
 @INTEGRATORS.register("direct")
 class DirectIntegrator(SamplingIntegrator):
     """``direct`` (Mitsuba's): direct illumination only, light and BSDF samples combined by

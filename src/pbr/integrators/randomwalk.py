@@ -21,7 +21,7 @@ import mitsuba as mi
 
 from ..bsdfs.base import ShadingContext
 from .base import INTEGRATORS, SamplingIntegrator, loop_ray, path_state, pbrt_max_depth, ray_state
-from .direct import hit_emission
+from .direct import add_unweighted_emission
 
 
 @INTEGRATORS.register("randomwalk")
@@ -56,7 +56,7 @@ class RandomWalkIntegrator(SamplingIntegrator):
 
     @dr.syntax
     def _sample(self, scene, rng, ray, wl, active):
-        geo, lights, bsdfs = scene.geometry, scene.lights, scene.bsdfs
+        geo, bsdfs = scene.geometry, scene.bsdfs
         ray, active, L, beta, depth, valid = path_state(ray, active)
         # Loop state: only what a bounce changes (see path); the ifs on Python values
         # are plain ifs, so that the excluded variables they read stay outside.
@@ -68,15 +68,8 @@ class RandomWalkIntegrator(SamplingIntegrator):
             si, shape = geo.intersect(ray, active)
             hit = active & si.is_valid()
             valid |= hit
-            Le, light = hit_emission(scene, si, shape, wl, hit)
-            skip = hit & (light > 0) & (depth == 0) if self.hide_emitters else mi.Bool(False)
-            L += dr.select(skip, 0.0, beta * Le)
-            if dr.hint(lights.has_infinite, mode="scalar"):
-                escaped = active & ~hit
-                if dr.hint(self.hide_emitters, mode="scalar"):
-                    escaped &= depth > 0
-                for Le_inf, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), escaped):
-                    L += dr.select(escaped, beta * Le_inf, 0.0)
+            L, skip = add_unweighted_emission(L, scene, si, shape, ray, wl, active, hit, depth, beta,
+                                              self.hide_emitters)
 
             go = hit & ~skip & (depth + 1 < self.max_depth)
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, go)

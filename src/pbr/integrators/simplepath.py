@@ -25,7 +25,7 @@ import mitsuba as mi
 from ..bsdfs.base import REFLECTION, TRANSMISSION, ShadingContext
 from ..spectrum import first_only
 from .base import INTEGRATORS, SamplingIntegrator, light_reaches, loop_ray, path_state, pbrt_max_depth, ray_state
-from .direct import hit_emission
+from .direct import add_unweighted_emission
 
 # How a direction is drawn without BSDF sampling (per BSDF entry).
 HEMI_SAME, HEMI_OTHER, SPHERE = 0, 1, 2
@@ -121,15 +121,8 @@ class SimplePathIntegrator(SamplingIntegrator):
             valid |= hit
             # Emission is counted where light sampling could not have found it.
             count = specular if self.sample_lights else mi.Bool(True)
-            Le, light = hit_emission(scene, si, shape, wl, hit)
-            skip = hit & (light > 0) & (depth == 0) if self.hide_emitters else mi.Bool(False)
-            L += dr.select(count & ~skip, beta * Le, 0.0)
-            if dr.hint(lights.has_infinite, mode="scalar"):
-                escaped = active & ~hit & count
-                if dr.hint(self.hide_emitters, mode="scalar"):
-                    escaped &= depth > 0
-                for Le_inf, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), escaped):
-                    L += dr.select(escaped, beta * Le_inf, 0.0)
+            L, skip = add_unweighted_emission(L, scene, si, shape, ray, wl, active, hit, depth, beta,
+                                              self.hide_emitters, count)
 
             go = hit & ~skip & (depth + 1 < self.max_depth)
             bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, go)
