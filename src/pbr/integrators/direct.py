@@ -124,10 +124,7 @@ class DirectIntegrator(SamplingIntegrator):
         hit = active & si.is_valid()
         L = mi.Spectrum(0.0)
         if not self.hide_emitters:
-            L += hit_emission(scene, si, shape, wl, hit)[0]
-            if infinite:
-                for Le_inf, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), active & ~hit):
-                    L += Le_inf
+            L, _ = add_unweighted_emission(L, scene, si, shape, ray, wl, active, hit, 0, 1.0, False)
 
         ctx = ShadingContext(si, wl)
         bsdf_id = dr.gather(mi.UInt32, scene.shape_bsdf, shape, hit)

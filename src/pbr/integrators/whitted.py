@@ -13,7 +13,7 @@ from ..samplers import IndependentSampler
 from ..samplers.independent import IndependentStream
 from ..spectrum import N_WAVELENGTHS, SampledWavelengths, first_only
 from .base import INTEGRATORS, SamplingIntegrator, light_reaches
-from .direct import hit_emission, intersect_camera_ray
+from .direct import add_unweighted_emission, intersect_camera_ray
 
 
 @INTEGRATORS.register("whitted")
@@ -116,10 +116,7 @@ class WhittedIntegrator(SamplingIntegrator):
         hit = active & si.is_valid()
         L = mi.Spectrum(0.0)
         if not hidden:
-            L += hit_emission(scene, si, shape, wl, hit)[0]
-            if lights.has_infinite:
-                for Le_inf, _ in lights.Le_escaped(ray.d, wl, ray.o, mi.Normal3f(0.0), active & ~hit):
-                    L += Le_inf
+            L, _ = add_unweighted_emission(L, scene, si, shape, ray, wl, active, hit, 0, 1.0, False)
         branches = None
         if depth + 2 <= self.max_depth:
             ctx = ShadingContext(si, wl)
