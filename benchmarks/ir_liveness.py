@@ -138,20 +138,44 @@ def _live_out(k: Kernel) -> dict[str, set[str]]:
     return live_out
 
 
+@dataclass
+class TraceCall:
+    kind: str                               # 'trace' (closest hit), 'test' (shadow ray) or 'call'
+    block: str
+    index: int                              # position of the call in its block
+    inputs: dict[int, str]                  # input slot -> the value stored there for the call
+
+
+def trace_calls(k: Kernel) -> list[TraceCall]:
+    """The kernel's Embree calls, in textual order, with the values stored as their
+    inputs (slots 1-3: the ray's origin, 5-7: its direction)."""
+    out = []
+    for name, instrs in k.blocks.items():
+        for n, i in enumerate(instrs):
+            if not re.match(r"^call void %rd\d+\(", i.text):
+                continue
+            # Dr.Jit's comment sits before the first store of the call's inputs
+            inputs, comment = {}, ""
+            for j in reversed(instrs[:n]):
+                m = re.match(r"store <\d+ x \w+> (%[\w.]+), ptr %u\d+_in_(\d+)_1", j.text)
+                if m:
+                    inputs.setdefault(int(m.group(2)), m.group(1))
+                if j.comment:
+                    comment = j.comment
+                    break
+            kind = "test" if "Ray test" in comment else "trace" if "Ray trace" in comment else "call"
+            out.append(TraceCall(kind, name, n, inputs))
+    return out
+
+
 def trace_liveness(ir: str) -> list[TraceLiveness]:
     """For each Embree call of the kernel, in textual order, the values live across it."""
     k = parse(ir)
     live_out = _live_out(k)
     result = []
-    for name, instrs in k.blocks.items():
-        for n, i in enumerate(instrs):
-            if not re.match(r"^call void %rd\d+\(", i.text):
-                continue
-            # the comment sits before the first store of the call's inputs
-            back = next((j.comment for j in reversed(instrs[:n + 1]) if j.comment), "")
-            kind = "test" if "Ray test" in back else "trace" if "Ray trace" in back else "call"
-            live = _live_before(k, instrs[n + 1:], live_out[name])
-            result.append(TraceLiveness(kind, name, n, Counter(k.types.get(v, "scalar") for v in live)))
+    for c in trace_calls(k):
+        live = _live_before(k, k.blocks[c.block][c.index + 1:], live_out[c.block])
+        result.append(TraceLiveness(c.kind, c.block, c.index, Counter(k.types.get(v, "scalar") for v in live)))
     return result
 
 

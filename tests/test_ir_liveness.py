@@ -52,71 +52,13 @@ def test_liveness_of_a_small_loop():
     assert t.kind == "test" and t.block == "l_2_body"
     assert t.live["float"] == 2 and t.live["mask"] == 0
     assert t.live["scalar"] == 2                       # %rd1 and %buffer
+    (c,) = ir_liveness.trace_calls(ir_liveness.parse(SMALL))
+    assert (c.kind, c.block, c.inputs) == ("test", "l_2_body", {0: "%f5"})
 
 
 def test_no_kernel_is_an_error():
     with pytest.raises(ValueError, match="no Dr.Jit kernel"):
         ir_liveness.trace_liveness("define void @f() {\n}\n")
-
-
-def _calls(k):
-    """(position, 'trace'/'test', {input slot: stored value}) of each Embree call."""
-    out, n = [], 0
-    for instrs in k.blocks.values():
-        for j, i in enumerate(instrs):
-            if re.match(r"^call void %rd\d+\(", i.text):
-                stores = {}
-                for x in reversed(instrs[:j]):
-                    m = re.match(r"store <16 x \w+> (%[\w.]+), ptr %u\d+_in_(\d+)_1", x.text)
-                    if m:
-                        stores.setdefault(int(m.group(2)), m.group(1))
-                    if x.comment:
-                        break
-                out.append((n, "test" if "Ray test" in x.comment else "trace", stores))
-            n += 1
-    return out
-
-
-@pytest.mark.skipif(pbr.get_backend() != "llvm", reason="reads the LLVM IR of the path kernel")
-def test_path_traces_the_shadow_ray_after_the_next_ray():
-    """In the path tracer's megakernel the shadow ray (Embree's occlusion call) comes after
-    the direction of the path's next ray is computed: the next-iteration values of the
-    closest-hit call's direction inputs are defined before the shadow-ray call. With the
-    trace where the depth-first schedule puts it (right after the light sample, before
-    the BSDF is sampled) this fails, and 8 more float vectors are live across it."""
-    d = pbr.cornell_box(16, 4)
-    d["integrator"] = {"type": "path", "max_depth": 4}
-    scene = pbr.load_dict(d)
-    dr.kernel_history()
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    try:
-        pbr.render(scene, spp=4, seed=0, progress=False)
-        h = dr.kernel_history()
-    finally:
-        dr.set_flag(dr.JitFlag.KernelHistory, False)
-    jit = [k for k in h if k["type"] == dr.KernelType.JIT and "ir" in k]
-    ir = max(jit, key=lambda k: k.get("operation_count", 0))["ir"].getvalue()
-    k = ir_liveness.parse(ir)
-    pos, defs, n = {}, {}, 0
-    for instrs in k.blocks.values():
-        for i in instrs:
-            if i.defines:
-                pos[i.defines], defs[i.defines] = n, i
-            n += 1
-    calls = _calls(k)
-    (trace,) = [c for c in calls if c[1] == "trace"]
-    (test,) = [c for c in calls if c[1] == "test"]
-    for slot in (5, 6, 7):                              # the ray direction's x, y, z
-        phi = defs[trace[2][slot]]
-        assert phi.incoming, f"the closest-hit call's direction {trace[2][slot]} is not a loop variable"
-        nxt = [v for v, b in phi.incoming if not b.endswith("_before")][0]
-        # the loop keeps finished lanes' values: select(active, new value, old value)
-        m = re.match(r"%[\w.]+ = select <16 x i1> %[\w.]+, <16 x float> (%[\w.]+),", defs[nxt].text)
-        new = m.group(1) if m else nxt
-        assert pos[new] < test[0], f"the next ray's direction ({new}) is computed after the shadow-ray call"
-    live = {t.kind: t.live for t in ir_liveness.trace_liveness(ir)}
-    print(f"float vectors live across the closest-hit call {live['trace']['float']}, "
-          f"the shadow-ray call {live['test']['float']}")
 
 
 def _kernel_ir(scene, spp=4):
@@ -132,10 +74,45 @@ def _kernel_ir(scene, spp=4):
 
 
 @pytest.mark.skipif(pbr.get_backend() != "llvm", reason="reads the LLVM IR of the path kernel")
+def test_path_traces_the_shadow_ray_after_the_next_ray():
+    """In the path tracer's megakernel the shadow ray (Embree's occlusion call) comes after
+    the direction of the path's next ray is computed: the next-iteration values of the
+    closest-hit call's direction inputs are defined before the shadow-ray call. With the
+    trace where the depth-first schedule puts it (right after the light sample, before
+    the BSDF is sampled) this fails, and 8 more float vectors are live across it."""
+    d = pbr.cornell_box(16, 4)
+    d["integrator"] = {"type": "path", "max_depth": 4}
+    _, ir = _kernel_ir(pbr.load_dict(d))
+    k = ir_liveness.parse(ir)
+    pos, defs, start, n = {}, {}, {}, 0
+    for name, instrs in k.blocks.items():
+        start[name] = n
+        for i in instrs:
+            if i.defines:
+                pos[i.defines], defs[i.defines] = n, i
+            n += 1
+    calls = ir_liveness.trace_calls(k)
+    (trace,) = [c for c in calls if c.kind == "trace"]
+    (test,) = [c for c in calls if c.kind == "test"]
+    for slot in (5, 6, 7):                              # the ray direction's x, y, z
+        phi = defs[trace.inputs[slot]]
+        assert phi.incoming, f"the closest-hit call's direction {trace.inputs[slot]} is not a loop variable"
+        nxt = [v for v, b in phi.incoming if not b.endswith("_before")][0]
+        # the loop keeps finished lanes' values: select(active, new value, old value)
+        m = re.match(r"%[\w.]+ = select <16 x i1> %[\w.]+, <16 x float> (%[\w.]+),", defs[nxt].text)
+        new = m.group(1) if m else nxt
+        assert pos[new] < start[test.block] + test.index, \
+            f"the next ray's direction ({new}) is computed after the shadow-ray call"
+    live = {t.kind: t.live for t in ir_liveness.trace_liveness(ir)}
+    print(f"float vectors live across the closest-hit call {live['trace']['float']}, "
+          f"the shadow-ray call {live['test']['float']}")
+
+
+@pytest.mark.skipif(pbr.get_backend() != "llvm", reason="reads the LLVM IR of the path kernel")
 def test_gathered_area_light_ablation():
     """profile_kernels' ``gathered-area-light``: the Cornell box's one light, its tables
     doubled, renders the same image bit for bit, and its 13 values (3 corners, the normal,
-    the area) are no longer live across the closest-hit call."""
+    the area) are no longer live across either ray-tracing call."""
     import profile_kernels
     d = pbr.cornell_box(16, 4)
     d["integrator"] = {"type": "path", "max_depth": 4}
