@@ -54,11 +54,12 @@ def hit_emission(scene, si, shape, wl, active):
 
 
 def add_unweighted_emission(L, scene, si, shape, ray, wl, active, hit, depth, beta, hide_emitters, count=None):
-    """``L`` plus what pbrt-v4's RandomWalk and SimplePath count at a vertex, without MIS:
-    ``beta`` times the radiance of the emitter hit and, for rays that left the scene, of
-    the infinite lights, on ``count`` lanes (all by default). With ``hide_emitters``
-    camera rays pass through emitters and do not see the environment. Returns (L, the
-    lanes passing through an emitter)."""
+    """``L`` plus the radiance a ray finds without MIS: ``beta`` times that of the emitter
+    hit and, for rays that left the scene, of the infinite lights, on ``count`` lanes (all
+    by default). What pbrt-v4's RandomWalk and SimplePath count at every vertex, and
+    ``direct`` / ``whitted`` for camera rays (``beta`` 1). With ``hide_emitters`` camera
+    rays pass through emitters and do not see the environment. Returns (L, the lanes
+    passing through an emitter)."""
     lights = scene.lights
     count = mi.Bool(True) if count is None else count
     Le, light = hit_emission(scene, si, shape, wl, hit)
