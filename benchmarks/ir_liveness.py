@@ -11,6 +11,10 @@ The analysis is SSA liveness on the kernel's main function (``define void @drjit
 a value is live after a call if a later instruction of its block, a successor block, or
 a ``phi`` on the edge to a successor uses it. Dr.Jit marks its calls into Embree with a
 ``; -------- Ray trace -------`` (closest hit) or ``Ray test`` (shadow ray) comment.
+Values are counted by kind: float vectors, masks and integer vectors, each split into
+those that vary per lane and the uniform ones (a scalar broadcast to every lane: a literal
+or a one-element array such as a light's corner, which the compiler may reload instead of
+preserving), and scalars.
 
     python benchmarks/ir_liveness.py out/ir/door_pbr_0.ll out/ir/door_mitsuba_0.ll
 
@@ -28,6 +32,7 @@ _NAME = re.compile(r"%[A-Za-z0-9_.]+")
 _DEF = re.compile(r"^(%[A-Za-z0-9_.]+) = (.*)$")
 _LABEL = re.compile(r"^([A-Za-z0-9_.]+):")
 _VEC = re.compile(r"<(\d+) x (\w+)>")
+_SPLAT = re.compile(r"shufflevector <\d+ x \w+> %[\w.]+, <\d+ x \w+> undef, <\d+ x i32> zeroinitializer$")
 
 
 @dataclass
@@ -42,7 +47,8 @@ class Instr:
 @dataclass
 class Kernel:
     blocks: dict[str, list[Instr]]          # in textual order
-    types: dict[str, str]                   # value -> 'float', 'mask', 'int', 'scalar'
+    types: dict[str, str]                   # value -> 'float', 'mask', 'int', 'scalar', or
+                                            # 'uniform float' ('uniform mask', ...)
 
     def successors(self, block: str) -> list[str]:
         return re.findall(r"label %([A-Za-z0-9_.]+)", self.blocks[block][-1].text)
@@ -57,8 +63,10 @@ class TraceLiveness:
 
     def __str__(self):
         c = self.live
-        return (f"{self.kind:5s} {sum(c.values()):4d} live: {c['float']} float vectors, {c['mask']} masks, "
-                f"{c['int']} integer vectors, {c['scalar']} scalars")
+        return (f"{self.kind:5s} {sum(c.values()):4d} live: "
+                + ", ".join(f"{c[k]} (+{c['uniform ' + k]} uniform) {name}" for k, name in
+                            (("float", "float vectors"), ("mask", "masks"), ("int", "integer vectors")))
+                + f", {c['scalar']} scalars")
 
 
 def _kind(rhs: str) -> str:
@@ -66,7 +74,8 @@ def _kind(rhs: str) -> str:
     if not m:
         return "scalar"
     t = m.group(2)
-    return "float" if t in ("float", "double", "half") else "mask" if t == "i1" else "int"
+    kind = "float" if t in ("float", "double", "half") else "mask" if t == "i1" else "int"
+    return "uniform " + kind if _SPLAT.match(rhs) else kind    # Dr.Jit's broadcast of a scalar
 
 
 def parse(ir: str) -> Kernel:
@@ -101,7 +110,7 @@ def parse(ir: str) -> Kernel:
     for b in blocks.values():
         for i in b:
             if i.defines:
-                k.types[i.defines] = _kind(i.text.split("=", 1)[1])
+                k.types[i.defines] = _kind(i.text.split("=", 1)[1].strip())
     return k
 
 

@@ -275,7 +275,8 @@ def report(name: str, who: str, t: float, h: list, ir_dir: str | None, run_ms: f
         if "ir" in k and pbr.get_backend() == "llvm":
             live = trace_liveness(k["ir"].getvalue())
             if live:
-                line += "; float vectors live across " + ", ".join(f"{t.kind} {t.live['float']}" for t in live)
+                line += "; float vectors (+ uniform vectors) live across " + ", ".join(
+                    f"{t.kind} {t.live['float']} (+{t.live['uniform float']})" for t in live)
         print(line)
 
 

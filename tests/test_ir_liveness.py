@@ -20,6 +20,8 @@ define void @drjit_0(i64 %start, i64 %end, i32 %thread_id, ptr noalias %params) 
 entry:
     %rd1 = load ptr, ptr %params, align 8
     %buffer = alloca i8, i32 64, align 64
+    %f8_1 = insertelement <16 x float> undef, float 0x3ff0000000000000, i32 0
+    %f8 = shufflevector <16 x float> %f8_1, <16 x float> undef, <16 x i32> zeroinitializer
     br label %l_2_cond
 
 l_2_cond:
@@ -36,7 +38,8 @@ l_2_body:
     %u7_in_0_1 = getelementptr inbounds i8, ptr %buffer, i32 0
     store <16 x float> %f5, ptr %u7_in_0_1, align 64
     call void %rd1(ptr %u7_in_0_1, ptr %rd1, ptr %u7_in_0_1, ptr %u7_in_0_1)
-    %f6 = fadd <16 x float> %f4, %f2
+    %f9 = fadd <16 x float> %f4, %f2
+    %f6 = fmul <16 x float> %f9, %f8
     br label %l_2_cond
 
 l_2_done:
@@ -46,11 +49,12 @@ l_2_done:
 
 
 def test_liveness_of_a_small_loop():
-    """Across the call: %f2 and %f4 (used after it), %rd1 and %buffer (used by the next
-    iteration); not %f5 (last used before it), %f6 (defined after it) or the mask %p3."""
+    """Across the call: %f2 and %f4 (used after it), the broadcast constant %f8 (a uniform
+    vector), %rd1 and %buffer (used by the next iteration); not %f5 (last used before it),
+    %f6 (defined after it) or the mask %p3."""
     (t,) = ir_liveness.trace_liveness(SMALL)
     assert t.kind == "test" and t.block == "l_2_body"
-    assert t.live["float"] == 2 and t.live["mask"] == 0
+    assert t.live["float"] == 2 and t.live["mask"] == 0 and t.live["uniform float"] == 1
     assert t.live["scalar"] == 2                       # %rd1 and %buffer
     (c,) = ir_liveness.trace_calls(ir_liveness.parse(SMALL))
     assert (c.kind, c.block, c.inputs) == ("test", "l_2_body", {0: "%f5"})
@@ -79,7 +83,8 @@ def test_path_traces_the_shadow_ray_after_the_next_ray():
     the direction of the path's next ray is computed: the next-iteration values of the
     closest-hit call's direction inputs are defined before the shadow-ray call. With the
     trace where the depth-first schedule puts it (right after the light sample, before
-    the BSDF is sampled) this fails, and 8 more float vectors are live across it."""
+    the BSDF is sampled) this fails, and 6 more per-lane float vectors (and 2 uniform
+    ones) are live across it."""
     d = pbr.cornell_box(16, 4)
     d["integrator"] = {"type": "path", "max_depth": 4}
     _, ir = _kernel_ir(pbr.load_dict(d))
@@ -112,17 +117,17 @@ def test_path_traces_the_shadow_ray_after_the_next_ray():
 def test_gathered_area_light_ablation():
     """profile_kernels' ``gathered-area-light``: the Cornell box's one light, its tables
     doubled, renders the same image bit for bit, and its 13 values (3 corners, the normal,
-    the area) are no longer live across either ray-tracing call."""
+    the area: uniform vectors, loaded once before the loop) are no longer live across
+    either ray-tracing call; the per-lane float vectors there stay the same."""
     import profile_kernels
     d = pbr.cornell_box(16, 4)
     d["integrator"] = {"type": "path", "max_depth": 4}
     img0, ir0 = _kernel_ir(pbr.load_dict(d))
     img1, ir1 = _kernel_ir(profile_kernels._gathered_area_light(pbr.load_dict(d)))
     assert np.array_equal(img0, img1) and img0.mean() > 0.01
-    f0 = [t.live["float"] for t in ir_liveness.trace_liveness(ir0)]
-    f1 = [t.live["float"] for t in ir_liveness.trace_liveness(ir1)]
-    print(f"float vectors live across the traces: {f0} -> {f1}")
-    assert [a - b for a, b in zip(f0, f1)] == [13, 13]
+    f0, f1 = ([(t.live["float"], t.live["uniform float"]) for t in ir_liveness.trace_liveness(ir)] for ir in (ir0, ir1))
+    print(f"(float, uniform) vectors live across the traces: {f0} -> {f1}")
+    assert [(a[0] - b[0], a[1] - b[1]) for a, b in zip(f0, f1)] == [(0, 13), (0, 13)]
     with pytest.raises(ValueError, match="one area light"):
         profile_kernels._gathered_area_light(pbr.load_dict(_no_area_light()))
 

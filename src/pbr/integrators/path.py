@@ -214,7 +214,7 @@ class PathIntegrator(SamplingIntegrator):
             if dr.hint(primal, mode="scalar"):
                 # The shadow ray is traced at the end of the body (below): there fewer
                 # values are live across the trace, which must preserve each of them
-                # (door's LLVM IR: 64 float vectors instead of 72; docs/performance.md).
+                # (door's LLVM IR: 48 + 16 float vectors instead of 54 + 18; docs/performance.md).
                 em = nonzero_estimate(Ld, em)
                 shadow_ray = si.spawn_ray_to(ls.p)
             else:
