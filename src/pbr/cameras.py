@@ -31,7 +31,7 @@ from .lens import LensSystem, read_lens_file
 from .geometry import read_motion
 from .samplers import SAMPLERS, IndependentSampler
 from .sampling import square_to_uniform_disk_concentric
-from .plugins.props import Props
+from .plugins.props import Props, Range
 from .plugins.registry import Registry
 
 SENSORS = Registry("sensor")
@@ -541,7 +541,7 @@ class ThinLensCamera(PerspectiveCamera):
         self.aperture_radius = props.float("aperture_radius", min=0.0)
         if self.aperture_radius == 0.0:   # Mitsuba warns and uses the float epsilon
             self.aperture_radius = float(np.finfo(np.float32).eps)
-        self.focus_distance = props.float("focus_distance", self.far_clip, min=0.0)
+        self.focus_distance = props.float("focus_distance", self.far_clip, valid=Range(0.0, open_lo=True))
 
 
 @SENSORS.register("orthographic")

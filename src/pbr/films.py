@@ -23,8 +23,9 @@ import numpy as np
 from . import backend
 from . import spectrum as spec
 from .filters import FILTERS, GaussianFilter
-from .plugins.props import Props, SceneError, did_you_mean
+from .plugins.props import Props, did_you_mean
 from .plugins.registry import Registry
+from .textures import read_spectrum_file, table_from_pairs
 
 FILMS = Registry("film")
 
@@ -469,9 +470,8 @@ class SpecFilm(HDRFilm):
             if t in FILTERS:
                 self.rfilter = FILTERS[t](props.child(key))
             elif t in ("spectrum", "regular", "irregular"):
-                props.mark(key)
                 self.srf_names.append(key)
-                tables.append(_srf_table(child, props.key(key)))
+                tables.append(_srf_table(props.child(key)))
             else:
                 raise props.error(key, f"expected a sensor response function (spectrum, regular, irregular) or a "
                                        f"filter, got {t!r}")
@@ -510,13 +510,12 @@ def _numbers(p: Props, name: str) -> np.ndarray:
         raise p.error(name, f"expected a list of numbers, got {v!r}") from None
 
 
-def _srf_table(d: dict, where: str) -> np.ndarray:
-    """A response function dict -> values at 1 nm steps over [LAMBDA_MIN, LAMBDA_MAX]
-    (piecewise linear, 0 outside its range)."""
-    p = Props(d, where)
-    t = p.type
+def _srf_table(p: Props) -> np.ndarray:
+    """A response function (the Props of its dict) -> values at 1 nm steps over
+    [LAMBDA_MIN, LAMBDA_MAX] (piecewise linear, 0 outside its range)."""
+    t, where = p.type, p.path
     if t == "spectrum" and p.has("filename"):
-        wl, vals = spec.read_spd(p.string("filename"))
+        wl, vals = read_spectrum_file(p)
     elif t == "spectrum":
         v = p.raw("value")
         if isinstance(v, str):
@@ -534,7 +533,4 @@ def _srf_table(d: dict, where: str) -> np.ndarray:
     else:
         wl, vals = _numbers(p, "wavelengths"), _numbers(p, "values")
     p.finish()
-    if wl.size < 2 or wl.size != vals.size or not np.all(np.diff(wl) > 0) or not np.all(np.isfinite(vals)):
-        raise SceneError(f"{where}: a response function needs at least two increasing wavelengths and finite values")
-    grid = spec.LAMBDA_MIN + np.arange(int(spec.LAMBDA_MAX - spec.LAMBDA_MIN) + 1)
-    return np.where((grid >= wl[0]) & (grid <= wl[-1]), np.interp(grid, wl, vals), 0.0)
+    return table_from_pairs(wl, vals, where)

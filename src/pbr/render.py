@@ -53,6 +53,17 @@ def sensor_index(scene, sensor):
         scene.sensors.remove(sensor)
 
 
+def _check_scene(scene) -> None:
+    """A pbr scene (what ``pbr.load_dict``/``load_file`` return), not a scene dict or a
+    Mitsuba scene."""
+    if hasattr(scene, "geometry") and hasattr(scene, "integrator"):
+        return
+    hint = ("a scene dict: pass pbr.load_dict(d)" if isinstance(scene, dict) else
+            "a Mitsuba scene: load the scene with pbr.load_file / pbr.load_dict instead"
+            if type(scene).__module__.startswith("mitsuba") else type(scene).__name__)
+    raise TypeError(f"render: scene: expected a pbr scene (pbr.load_dict, pbr.load_file), got {hint}")
+
+
 def _count(name, v) -> int:
     """A sample count: a non-negative integer (2.5 is an error, not 2)."""
     if isinstance(v, bool) or not isinstance(v, numbers.Integral) or v < 0:
@@ -133,6 +144,7 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
     ``(image, pbr.adaptive.AdaptiveInfo)``: per-pixel sample counts and estimated
     relative errors (with neither of the two, of a uniform ``spp`` render: the same
     samples as without it)."""
+    _check_scene(scene)
     scene.geometry.check_current()    # (before any symbolic loop: its abort leaves Dr.Jit unclean)
     integrator = scene.integrator if integrator is None else as_integrator(integrator)
     spp, spp_grad = _count("spp", spp), _count("spp_grad", spp_grad)

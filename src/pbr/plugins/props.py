@@ -152,7 +152,9 @@ class Props:
         v = self.raw(name, default)
         if v is None:
             raise self.error(name, "missing required float parameter")
-        if isinstance(v, bool) or not isinstance(v, numbers.Real):
+        if isinstance(v, (bool, np.bool_, str)):   # Mitsuba: "has the wrong type"
+            raise self.error(name, f"expected a number, got {v!r}")
+        if not isinstance(v, numbers.Real):
             try:
                 v = float(v)
             except (TypeError, ValueError):
@@ -165,7 +167,9 @@ class Props:
         v = self.raw(name, default)
         if v is None:
             raise self.error(name, "missing required integer parameter")
-        if isinstance(v, bool) or not isinstance(v, numbers.Integral):
+        if isinstance(v, (bool, np.bool_)):   # a bool is an Integral in Python, not here
+            raise self.error(name, f"expected an integer, got {v!r}")
+        if not isinstance(v, numbers.Integral):
             if isinstance(v, numbers.Real) and float(v).is_integer():
                 v = int(v)
             else:
@@ -197,7 +201,7 @@ class Props:
         if v is None:
             raise self.error(name, "missing required 3-vector")
         try:
-            a = np.asarray(v, dtype=np.float64).reshape(-1)
+            a = np.empty(0) if isinstance(v, (str, bool)) else np.asarray(v, dtype=np.float64).reshape(-1)
         except (TypeError, ValueError):
             a = np.empty(0)
         if a.size == 1:

@@ -14,6 +14,7 @@ and media; per emitter its key path (``LightSet.paths``). See docs/architecture.
 
 from __future__ import annotations
 
+import contextlib
 import os
 
 from .. import backend
@@ -55,6 +56,7 @@ class Loader:
         self._bsdf_cache: dict[int, int] = {}
         self.bsdf_textures: dict[int, set] = {}   # BSDF entry -> texture slots it reads
         self._reading: list[set] = []
+        self._following: dict[int, str] = {}   # id(dict being loaded) -> its key path
         self._collect_ids(d, "scene")
 
     # -- ids, refs, files ----------------------------------------------------------------
@@ -82,7 +84,24 @@ class Loader:
             raise SceneError(f"{path}: file not found: {fname!r} (looked in {self.base_dir})")
         return full
 
+    @contextlib.contextmanager
+    def following(self, obj: dict, path: str, at: str | None = None):
+        """The block that loads ``obj`` (a BSDF or a referenced texture) at ``path``: a
+        reference back to ``obj`` met meanwhile (at key path ``at``, default ``path``) is
+        a cycle, which would recurse forever."""
+        if id(obj) in self._following:
+            raise SceneError(f"{at or path}: reference cycle: it leads back to {self._following[id(obj)]}, "
+                             "which is still being loaded")
+        self._following[id(obj)] = path
+        try:
+            yield
+        finally:
+            del self._following[id(obj)]
+
     def _deref(self, v: dict, path: str) -> tuple[dict, str]:
+        if not isinstance(v, dict):
+            raise SceneError(f"{path}: expected a plugin dict with a 'type' (or a reference "
+                             f"{{'type': 'ref', 'id': ...}}), got {type(v).__name__} {v!r}")
         if v.get("type") == "ref":
             p = Props(v, path, self)
             oid = p.string("id")
@@ -103,12 +122,14 @@ class Loader:
     # -- plugins -------------------------------------------------------------------------
     def bsdf(self, v: dict, path: str) -> int:
         """Entry of the BSDF described (or referenced) by ``v``; each dict is parsed once."""
+        at = path
         v, path = self._deref(v, path)
         if id(v) not in self._bsdf_cache:
             first = len(self.textures.items)
             self._reading.append(set())   # slots of nested BSDFs parsed earlier
             try:
-                b = self.bsdfs.add(self, Props(v, path, self))
+                with self.following(v, path, at):
+                    b = self.bsdfs.add(self, Props(v, path, self))
             finally:
                 nested = self._reading.pop()
             self._bsdf_cache[id(v)] = b
@@ -281,6 +302,9 @@ class Loader:
                 self.lights.add(self, Props(v, path, self))
             elif t in MEDIUM_TYPES:
                 self.medium(v, path)
+            elif t == "ref":
+                raise SceneError(f"{path}: a reference ('type': 'ref') belongs inside the plugin that uses the "
+                                 "object it names, not at the top level of the scene")
             else:
                 raise SceneError(f"{path}: unknown plugin type {t!r}{did_you_mean(t, KNOWN_TYPES)}")
         for key, v in instances:   # after every shapegroup, wherever it appears

@@ -579,7 +579,7 @@ class PBRTScene:
         self.including.append(path)
         try:
             last = None
-            for d in read_directives(path):
+            for d in read_directives(path, known=DIRECTIVES):
                 if last is not None:
                     self.directive(last)
                 last = d
@@ -594,7 +594,10 @@ class PBRTScene:
     def directive(self, d: Directive) -> None:
         h = getattr(self, f"_d_{d.name}", None)
         if h is None:
-            raise XMLError(f"{d.where}: unknown directive {d.name!r}")
+            raise XMLError(f"{d.where}: unknown directive {d.name!r}{did_you_mean(d.name, DIRECTIVES)}")
+        if d.name in WORLD_ONLY and not self.world:
+            raise XMLError(f"{d.where}: {d.name}: must come after WorldBegin (the scene description is "
+                           "in the world block)")
         for q in d.params:          # pbrt-v4 ties each parameter to the colour space of its directive
             if q.color_space is None:
                 q.color_space = self.state.color_space
@@ -2225,6 +2228,14 @@ class PBRTScene:
 
 
 # -- helpers ----------------------------------------------------------------------------------------------
+
+# pbrt-v4's directives that pbr reads: one ``_d_<name>`` method each.
+DIRECTIVES = frozenset(n[3:] for n in dir(PBRTScene) if n.startswith("_d_"))
+# Those pbrt-v4 refuses before WorldBegin (its VERIFY_WORLD); the options (Camera, Film,
+# ...) are refused after it (``PBRTScene._option``).
+WORLD_ONLY = frozenset(("Shape", "LightSource", "AreaLightSource", "Material", "MakeNamedMaterial", "NamedMaterial",
+                        "Texture", "ObjectBegin", "ObjectEnd", "ObjectInstance"))
+
 
 def _safe(name: str) -> str:
     return "".join(c if c.isalnum() or c in "_-" else "_" for c in name)

@@ -31,6 +31,7 @@ _TOKEN_RE = re.compile(r'''
     (?P<ws>[ \t\r]+) | (?P<nl>\n) | (?P<comment>\#[^\n]*) |
     (?P<str>"(?:[^"\\\n]|\\.)*") | (?P<open>\[) | (?P<close>\]) |
     (?P<word>[^\s"\[\]\#]+) | (?P<bad>")''', re.VERBOSE)
+_NUMBER_RE = re.compile(r"[+-]?(\d|\.\d)")      # how a number token starts
 # How many quoted strings each directive takes before its parameters (pbrt-v4's syntax).
 _STRING_ARGS = {k: 1 for k in (
     "Shape", "Material", "LightSource", "AreaLightSource", "Camera", "Film", "Sampler", "PixelFilter",
@@ -163,8 +164,11 @@ def _convert(ptype: str, name: str, raw: list, where: str, directive: str) -> li
     return out
 
 
-def read_directives(path: str, text: str | None = None):
-    """Yield the directives of a pbrt-v4 file (not following ``Include``/``Import``)."""
+def read_directives(path: str, text: str | None = None, known=None):
+    """Yield the directives of a pbrt-v4 file (not following ``Include``/``Import``).
+    ``known``: the directive names; another name is yielded without arguments (they are
+    skipped up to the next word), for the reader to report as unknown: read as a
+    parameter list, they would give an error about that instead."""
     toks = list(tokenize(read_text(path) if text is None else text, path))
     i, n = 0, len(toks)
     while i < n:
@@ -172,6 +176,12 @@ def read_directives(path: str, text: str | None = None):
         if t.quoted or t.text in ("[", "]"):
             shown = f'"{t.text}"' if t.quoted else t.text
             raise XMLError(f"{t.where}: expected a directive, got {shown}")
+        if known is not None and t.text not in known:
+            i += 1
+            while i < n and (toks[i].quoted or toks[i].text in ("[", "]") or _NUMBER_RE.match(toks[i].text)):
+                i += 1
+            yield Directive(t.text, [], [], t.where)
+            continue
         d = Directive(t.text, [], [], t.where)
         i += 1
         if d.name == "ActiveTransform" and i < n and not toks[i].quoted:
@@ -205,7 +215,7 @@ def read_directives(path: str, text: str | None = None):
                     break
                 d.args.append(a.text)
             else:
-                if nstr is not None or not re.match(r"[+-]?(\d|\.\d)", a.text):
+                if nstr is not None or not _NUMBER_RE.match(a.text):
                     break       # the next directive
                 d.args.append(_number(a, d.name))
             i += 1

@@ -17,6 +17,6 @@ them, differentiably, on ``update()``.
 from .kinds import (BASE_ONE, BASE_SIGMOID, BASE_TABLE, BITMAP, CHECKERBOARD, COMPOSITE, CONSTANT,  # noqa: F401
                     MESH_ATTRIBUTE, OP_CHECKER, OP_MIX, OP_SCALE, OP_SQRT, Bitmap, Checkerboard, Composite,
                     ConstantSpectrum, MeshAttribute)
-from .loading import TEXTURE_TYPES, add_tabulated, load_spectrum, table_from_pairs  # noqa: F401
+from .loading import TEXTURE_TYPES, add_tabulated, load_spectrum, read_spectrum_file, table_from_pairs  # noqa: F401
 from .tables import TextureTables  # noqa: F401
 from .textureset import TextureSet  # noqa: F401

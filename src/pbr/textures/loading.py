@@ -85,7 +85,8 @@ def _load_spectrum(loader, value, path, emitter, unbounded, valid, scalar) -> in
     if p.type == "ref":
         obj = loader.resolve_ref(p.string("id"), path)
         p.finish()
-        return load_spectrum(loader, obj, path, emitter, unbounded, scalar=scalar)
+        with loader.following(obj, path):
+            return load_spectrum(loader, obj, path, emitter, unbounded, scalar=scalar)
     if p.type not in TEXTURE_TYPES:
         raise SceneError(f"{path}: unsupported texture/spectrum type {p.type!r}"
                          f"{did_you_mean(p.type, [*TEXTURE_TYPES, 'ref'])} (supported: {TEXTURE_TYPES.supported()}, ref)")
@@ -123,6 +124,20 @@ def _check_texture(tex, valid: Range, path: str) -> None:
     check_params(tex, path=path)
 
 
+def read_spectrum_file(p: Props, name: str = "filename") -> tuple[np.ndarray, np.ndarray]:
+    """(wavelengths, values) of the two-column ``.spd`` file parameter ``name`` of ``p``
+    names, found by the load context (``p.loader``: relative to the scene file); a file
+    that is missing or not such a table is a :class:`SceneError` naming the key path."""
+    fname = p.string(name)
+    path = p.loader.resolve_path(fname, p.key(name)) if p.loader is not None else fname
+    try:
+        return spec.read_spd(path)
+    except OSError as e:
+        raise p.error(name, f"cannot read spectrum file {fname!r}: {e.strerror}") from None
+    except ValueError as e:     # read_table's message names the file and line
+        raise p.error(name, f"not a spectrum file (wavelength value per line): {e}") from None
+
+
 def add_tabulated(loader, wavelengths, values, path: str) -> int:
     """A texture slot for a tabulated spectrum (piecewise linear between samples)."""
     return loader.textures.add(ConstantSpectrum(path, BASE_TABLE, table=table_from_pairs(wavelengths, values, path)))
@@ -130,10 +145,13 @@ def add_tabulated(loader, wavelengths, values, path: str) -> int:
 
 def table_from_pairs(wl: np.ndarray, vals: np.ndarray, where: str) -> np.ndarray:
     """(wavelength, value) samples -> the 1 nm table of a tabulated spectrum."""
-    wl = np.asarray(wl, np.float64)
-    vals = np.asarray(vals, np.float64)
-    if wl.size < 2 or not np.all(np.diff(wl) > 0):
-        raise SceneError(f"{where}: wavelengths must be at least two strictly increasing values")
+    wl = np.asarray(wl, np.float64).reshape(-1)
+    vals = np.asarray(vals, np.float64).reshape(-1)
+    if wl.size != vals.size:
+        raise SceneError(f"{where}: {wl.size} wavelengths but {vals.size} values")
+    if wl.size < 2 or not np.all(np.diff(wl) > 0) or not wl[0] > 0:
+        raise SceneError(f"{where}: wavelengths must be at least two strictly increasing values, in nm (> 0), "
+                         f"got {', '.join(f'{x:g}' for x in wl[:6])}{', ...' if wl.size > 6 else ''}")
     FINITE.check(vals, where, at=lambda i: f"{wl[i]:g} nm")
     grid = spec.LAMBDA_MIN + np.arange(TAB_N)
     # Zero outside the given range, as Mitsuba's irregular/regular spectra.
@@ -186,7 +204,7 @@ def _spectrum(loader, p, form, emitter, unbounded):
     """
     textures, path = loader.textures, p.path
     if p.has("filename"):
-        wl, vals = spec.read_spd(loader.resolve_path(p.string("filename"), p.key("filename")))
+        wl, vals = read_spectrum_file(p)
         p.finish()
         table = table_from_pairs(wl, vals, p.key("filename"))
         return textures.add(ConstantSpectrum(path, BASE_TABLE, table=table))
