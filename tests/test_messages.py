@@ -169,3 +169,18 @@ def test_pbrt_syntax_errors_name_the_directive(tmp_path, body, message):
     f.write_text(body)
     with pytest.raises(XMLError, match="^" + re.escape(str(f)) + message):
         pbr.load_file(str(f))
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda d: d["sensor"].__setitem__("film", "hdrfilm"),
+     r"scene\.sensor\.film: unknown parameter 'film' for plugin type 'perspective' \(a nested plugin is a dict with a "
+     r"'type', got str 'hdrfilm'\)"),
+    (lambda d: d["floor"].__setitem__("interior", {"type": "homogeneous", "phase": {"type": "ref", "id": "white"}}),
+     r"scene\.floor\.interior\.phase: unknown parameter 'phase' for plugin type 'homogeneous', or a nested 'ref' "
+     r"\(to a 'diffuse'\) plugin that it does not take"),
+])
+def test_nested_plugins_of_the_wrong_kind_say_so(change, message):
+    """A film given as a string, or a BSDF given as a medium's phase function, was
+    reported only as an unknown parameter, which 'film' and 'phase' are not."""
+    with pytest.raises(pbr.SceneError, match="^" + message + "$"):
+        pbr.load_dict(_mutated(change))

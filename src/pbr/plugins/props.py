@@ -28,6 +28,12 @@ class SceneError(ValueError):
 KNOWN_TYPES: set[str] = set()
 
 
+# Mitsuba's usual names of nested plugins (``'film': {...}``), for the message about a
+# value there that is not a plugin dict.
+NESTED_SLOTS = frozenset(("bsdf", "emitter", "film", "sampler", "rfilter", "phase", "medium", "interior", "exterior",
+                          "texture", "volume"))
+
+
 def did_you_mean(name, choices) -> str:
     """`` (did you mean 'x'?)`` for the known name closest to a misspelt ``name``, or ''."""
     import difflib
@@ -143,8 +149,13 @@ class Props:
             t = self.d[k].get("type") if isinstance(self.d[k], dict) else None
             if isinstance(t, str) and KNOWN_TYPES and t not in KNOWN_TYPES:   # a misspelt nested plugin
                 raise SceneError(f"{self.key(k)}: unknown plugin type {t!r}{did_you_mean(t, KNOWN_TYPES)}")
-            raise SceneError(f"{self.key(k)}: unknown parameter {k!r} for plugin type {self.type!r}"
-                             f"{did_you_mean(k, self._used)}")
+            hint = did_you_mean(k, self._used)
+            if isinstance(t, str):      # a known plugin type this one does not read
+                target = self.loader._target_type(self.d[k]) if t == "ref" and self.loader is not None else None
+                hint += f", or a nested {t!r}" + (f" (to a {target!r})" if target else "") + " plugin that it does not take"
+            elif k in NESTED_SLOTS and not isinstance(self.d[k], dict):
+                hint += f" (a nested plugin is a dict with a 'type', got {type(self.d[k]).__name__} {self.d[k]!r})"
+            raise SceneError(f"{self.key(k)}: unknown parameter {k!r} for plugin type {self.type!r}{hint}")
 
     # -- typed getters --------------------------------------------------------------
     def float(self, name: str, default=None, min=None, max=None, valid: Range | None = None) -> float:
