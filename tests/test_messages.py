@@ -161,10 +161,13 @@ def test_render_names_a_scene_that_is_not_loaded():
     ('WorldBegin\nShapee "sphere" "float radius" 1\n', r":2: unknown directive 'Shapee' \(did you mean 'Shape'\?\)$"),
     ('Shape "sphere"\nWorldBegin\n', r":1: Shape: must come after WorldBegin"),
     ('WorldBegin\nRotate a 0 0 1\nShape "sphere"\n', r":2: Rotate: expected 4 numbers, got \[\]$"),
+    ('Integrator "volpath" "integer maxdepth" -1\nWorldBegin\nShape "sphere"\n',
+     r":1: Integrator: parameter 'maxdepth': expected an integer >= 0, got -1"),
 ])
 def test_pbrt_syntax_errors_name_the_directive(tmp_path, body, message):
     """A misspelt directive was read with its arguments as a parameter list ("expected a
-    parameter declaration"); a shape before WorldBegin was rendered (pbrt-v4 refuses it)."""
+    parameter declaration"); a shape before WorldBegin was rendered (pbrt-v4 refuses it);
+    maxdepth -1 became Mitsuba's max_depth 0 (a black image) and -5 an error about -4."""
     f = tmp_path / "s.pbrt"
     f.write_text(body)
     with pytest.raises(XMLError, match="^" + re.escape(str(f)) + message):

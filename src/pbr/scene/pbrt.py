@@ -2194,7 +2194,15 @@ class PBRTScene:
         t = d.args[0] if d else "volpath"
         p = _Params(d, self) if d else None
         maxdepth = p.one("maxdepth", "integer", 5) if p else 5
-        maxdepth = int(self.overrides.get("maxdepth", maxdepth))
+        if "maxdepth" in self.overrides:
+            maxdepth = int(self.overrides["maxdepth"])
+            if maxdepth < 0:
+                raise XMLError(f"load_file: maxdepth: expected an integer >= 0, got {maxdepth}")
+        elif maxdepth < 0:
+            # Not one meaning in pbrt-v4: path, simplepath and lightpath never reach it
+            # (no limit), volpath and simplevolpath stop at the first vertex
+            raise p.error("maxdepth", f"expected an integer >= 0, got {maxdepth} (pbrt-v4's integrators "
+                                      "disagree on a negative one)")
         names = {"volpath": "volpath", "path": "path", "bdpt": "bdpt", "mlt": "mlt", "sppm": "sppm",
                  "lightpath": "lightpath", "simplepath": "simplepath", "simplevolpath": "simplevolpath",
                  "randomwalk": "randomwalk", "ambientocclusion": "ambientocclusion", "aov": "aov"}
