@@ -36,36 +36,38 @@ def fresnel_dielectric(cos_theta_i, eta):
 
 
 def fresnel_conductor(cos_theta_i, eta, k):
-    """Unpolarised reflectance of a conductor with complex IOR eta + i k (per wavelength).
+    """Unpolarised reflectance of a conductor with complex IOR n = eta + i k (per wavelength).
 
-    Exact formula with complex arithmetic: r_s = (c - n c_t)/(c + n c_t),
-    r_p = (n c - c_t)/(n c + c_t), c_t = sqrt(1 - sin^2 / n^2)."""
+    Exact formula with complex arithmetic, written without dividing by n so that it
+    holds down to n = 0 (eta = k = 0 is a valid input: a perfect mirror, the limit of
+    total internal reflection): with w = n c_t = sqrt(n^2 - sin^2) (principal root),
+    r_s = (c - w)/(c + w) and r_p = (n^2 c - w)/(n^2 c + w)."""
     c = dr.clip(dr.abs(cos_theta_i), 0.0, 1.0)
     s2 = 1.0 - c * c
-    # n^2 = (eta^2 - k^2) + i 2 eta k ; sin_t^2 = s2 / n^2
     n2_re, n2_im = eta * eta - k * k, 2.0 * eta * k
-    inv = dr.rcp(n2_re * n2_re + n2_im * n2_im)
-    st_re, st_im = s2 * n2_re * inv, -s2 * n2_im * inv
-    ct_re, ct_im = _csqrt(1.0 - st_re, -st_im)
-    # n * c_t
-    nct_re, nct_im = eta * ct_re - k * ct_im, eta * ct_im + k * ct_re
-    rs = _cabs2_ratio(c - nct_re, -nct_im, c + nct_re, nct_im)
-    # n * c
-    nc_re, nc_im = eta * c, k * c
-    rp = _cabs2_ratio(nc_re - ct_re, nc_im - ct_im, nc_re + ct_re, nc_im + ct_im)
+    w_re, w_im = _csqrt(n2_re - s2, n2_im)
+    rs = _cabs2_ratio(c - w_re, -w_im, c + w_re, w_im)
+    n2c_re, n2c_im = n2_re * c, n2_im * c
+    rp = _cabs2_ratio(n2c_re - w_re, n2c_im - w_im, n2c_re + w_re, n2c_im + w_im)
     return 0.5 * (rs + rp)
 
 
 def _csqrt(re, im):
-    """Principal square root of a complex number (re, im)."""
-    r = dr.sqrt(re * re + im * im)
-    a = dr.safe_sqrt(0.5 * (r + re))
-    b = dr.safe_sqrt(0.5 * (r - re))
+    """Principal square root (a, b) of a complex number (re, im). The larger of a, b is
+    sqrt((|z| + |re|) / 2) and the smaller |im| / (2 * larger): no cancellation of
+    |z| - |re| when |im| << |re| (a conductor with small k under total internal reflection)."""
+    big = dr.safe_sqrt(0.5 * (dr.sqrt(dr.fma(re, re, im * im)) + dr.abs(re)))
+    small = dr.select(big > 0, 0.5 * dr.abs(im) / big, 0.0)
+    pos = re >= 0
+    a, b = dr.select(pos, big, small), dr.select(pos, small, big)
     return a, dr.select(im < 0, -b, b)
 
 
 def _cabs2_ratio(ar, ai, br, bi):
-    return (ar * ar + ai * ai) / dr.maximum(br * br + bi * bi, 1e-30)
+    """|a|^2 / |b|^2, and 1 where b = 0 (there a = 0 too in fresnel_conductor, whose
+    ratios tend to 1: w = 0 only where n^2 = sin^2, i.e. at grazing or on n = 0)."""
+    den = br * br + bi * bi
+    return dr.select(den > 0, (ar * ar + ai * ai) / den, 1.0)
 
 
 def reflect(wi):
