@@ -257,6 +257,26 @@ def test_nonfinite_samples_are_counted_and_reported():
         pbr.render(scene, on_nonfinite="stop")
 
 
+@pytest.mark.parametrize("integrator", ["path", "prb", "volpath", "prbvolpath", "bdpt", "ptracer", "sppm",
+                                        "simplepath"])
+def test_a_nan_throughput_reaches_the_count(monkeypatch, integrator):
+    """A BSDF whose sampled weight is NaN (here a conductor's Fresnel term made NaN, as
+    eta = k = 0 once made it): the path goes on and its NaN estimate is counted. The
+    integrators ended such a path where max(beta) > 0 is false, as it is for NaN, so
+    the image lost its light without a warning. (Not randomwalk: it evaluates BSDFs
+    toward uniformly sampled directions, and a mirror's value there is 0.)"""
+    import pbr.bsdfs.conductor as conductor
+    monkeypatch.setattr(conductor, "fresnel_conductor", lambda cos_i, eta, k: eta * k * float("nan"))
+    d = _box(white={"type": "conductor", "id": "white", "material": "none"})
+    d["light"]["bsdf"] = {"type": "diffuse"}
+    d["integrator"] = {"type": integrator, "max_depth": 4} if integrator not in ("sppm", "bdpt") else \
+        {"type": integrator, "maxdepth": 3}
+    if integrator == "sppm":
+        d["integrator"].update(photonsperiteration=2000, iterations=2)
+    with pytest.raises(FloatingPointError, match=r"^pbr.render: \d+ samples? w"):
+        pbr.render(pbr.load_dict(d), on_nonfinite="raise")
+
+
 def test_nonfinite_samples_of_a_differentiable_render_are_reported_after_backward():
     """With gradients the count is read after the derivative pass (the render does not
     wait for its image): the primal samples' count, then the adjoint pass's."""

@@ -534,7 +534,19 @@ def light_reaches(geo, si, p, contribution, em, skip_zero: bool = True):
 def nonzero_estimate(contribution, em):
     """Lanes of ``em`` whose light-sample ``contribution`` (a spectrum) is not zero: the
     ones worth a shadow ray (:func:`light_reaches`)."""
-    return em & dr.any(dr.detach(contribution) != 0)
+    return em & nonzero(contribution)
+
+
+def nonzero(s):
+    """Lanes where some wavelength of the spectrum ``s`` is not zero (pbrt-v4's ``if
+    (!beta)``): whether a path's throughput still carries anything. A NaN counts as not
+    zero, so that a path whose throughput went NaN goes on to the film's count of
+    non-finite samples (:class:`NonFinite`) instead of ending unseen, as it did with
+    ``max(beta) > 0`` (a conductor of eta = k = 0 rendered black without a warning).
+    Written ``~(s == 0)``: Dr.Jit's ``!=`` on floats is an ordered comparison, false
+    for NaN (``s != 0`` would end those paths too)."""
+    m = ~(dr.detach(s) == 0)
+    return m if dr.depth_v(m) == 1 else dr.any(m)      # (dr.any of a Bool would reduce over lanes)
 
 
 def forward_derivative(Lo) -> mi.Spectrum:

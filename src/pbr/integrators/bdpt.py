@@ -14,7 +14,7 @@ from ..bsdfs.base import ShadingContext
 from ..lights.directional import DirectionalLight
 from ..lights.directionalarea import DirectionalAreaLight
 from ..spectrum import first_only
-from .base import INTEGRATORS, loop_ray, nonzero_estimate, ray_state
+from .base import INTEGRATORS, loop_ray, nonzero, nonzero_estimate, ray_state
 from .lightpath import (LightTracingIntegrator, connect_to_camera, eval_importance, lens_sample,
                         sample_importance, shading_correction, start_light_path)
 
@@ -351,7 +351,7 @@ class BDPTIntegrator(LightTracingIntegrator):
             pdf_dir = dr.select(bs.delta, 0.0, bs.pdf)
             ray_var = ray_state(si.spawn_ray(wo), extent=False)[0]
             k += 1
-            active = go & (bs.pdf > 0) & side_ok & (dr.max(beta) > 0)
+            active = go & (bs.pdf > 0) & side_ok & nonzero(beta)
             rng_state = rng.loop_state()
         rng.set_loop_state(rng_state)
 
@@ -533,7 +533,7 @@ class BDPTIntegrator(LightTracingIntegrator):
             pdf_dir = dr.select(bs.delta, 0.0, bs.pdf)
             ray_var = ray_state(si.spawn_ray(si.to_world(bs.wo)))[0]
             k += 1
-            active = go & (bs.pdf > 0) & (dr.max(beta) > 0)
+            active = go & (bs.pdf > 0) & nonzero(beta)
             rng_state = rng.loop_state()
         rng.set_loop_state(rng_state)
 

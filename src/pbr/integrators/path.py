@@ -23,7 +23,7 @@ from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..sampling import power_heuristic
 from ..spectrum import first_only
 from .base import (INTEGRATORS, BACKWARD, PRIMAL, SamplingIntegrator, depth_limit, emitted_mis, forward_derivative,
-                   light_reaches, loop_ray, nonzero_estimate, mis_state, path_state, ray_state)
+                   light_reaches, loop_ray, nonzero, nonzero_estimate, mis_state, path_state, ray_state)
 
 
 def face_the_ray(si, ray, mask):
@@ -278,7 +278,7 @@ class PathIntegrator(SamplingIntegrator):
             rr = (depth >= self.rr_depth) & ~skip
             survive = rng.next_float32() < q
             beta[rr] = beta * dr.rcp(dr.detach(q))
-            active = skip | (cont & (~rr | survive) & (b_max > 0))
+            active = skip | (cont & (~rr | survive) & nonzero(beta))
             rng_state = rng.loop_state()
 
         rng.set_loop_state(rng_state)

@@ -16,7 +16,7 @@ from ..sampling import power_heuristic
 from ..spectrum import first_only
 from . import volume
 from .base import (INTEGRATORS, BACKWARD, FORWARD, PRIMAL, ConditionalState, depth_limit, emitted_mis,
-                   forward_derivative, mis_state, nonzero_estimate, path_state)
+                   forward_derivative, mis_state, nonzero, nonzero_estimate, path_state)
 from .volpath import _MediumAware
 
 
@@ -126,7 +126,7 @@ class PRBVolPathIntegrator(_MediumAware):
         n_null = dr.select(null, n_null + 1, n_null)
         capped = null & (n_null >= self.max_null)
         beta[capped] = mi.Spectrum(0.0)
-        return (beta, p_sc, scattered, n_null, dL_fwd), real | capped | ~(dr.max(beta) > 0)
+        return (beta, p_sc, scattered, n_null, dL_fwd), real | capped | ~nonzero(beta)
 
     def _ratio_tracking(self, state, c, rng, media, mode, dL, adj):
         """A tentative collision of a shadow ray in a grid medium: the transmittance is
@@ -236,12 +236,12 @@ class PRBVolPathIntegrator(_MediumAware):
                 n_null[active] = 0
 
             # -- surface reached (or the ray escaped): emission, MIS-weighted ---------------
-            surf = active & ~scattered & hit & (dr.max(beta) > 0)
+            surf = active & ~scattered & hit & nonzero(beta)
             light = lights.light_of_hit(scene, shape, si, surf)
             on_light = surf & (light > 0)
             skip = on_light & (depth == 0) if self.hide_emitters else mi.Bool(False)
             on_light &= ~skip
-            escaped = active & ~scattered & ~hit & (dr.max(beta) > 0)
+            escaped = active & ~scattered & ~hit & nonzero(beta)
             if dr.hint(self.hide_emitters, mode="scalar"):
                 escaped &= depth > 0
             with dr.resume_grad(when=not primal):
@@ -341,7 +341,7 @@ class PRBVolPathIntegrator(_MediumAware):
             rr = cont & (depth >= self.rr_depth)
             survive = rng.next_float32() < q
             beta[rr] = beta * dr.rcp(q)
-            active = skip | (cont & (~rr | survive) & (dr.max(beta) > 0))
+            active = skip | (cont & (~rr | survive) & nonzero(beta))
             cond_state = cond.update(dL_fwd=dL_fwd, medium=medium, n_null=n_null, terminated=terminated)
             rng_state = rng.loop_state()
 

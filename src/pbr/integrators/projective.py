@@ -82,7 +82,7 @@ from ..plugins.props import SceneError
 from ..samplers import IndependentSampler, IndependentStream, seed_array
 from ..spectrum import SampledWavelengths
 from .base import (BACKWARD, FORWARD, INTEGRATORS, PRIMAL, depth_limit, forward_derivative, loop_ray,
-                   max_samples_per_pass, ray_state)
+                   max_samples_per_pass, nonzero, ray_state)
 from .path import PathIntegrator
 from .silhouettes import CurveSet, curve_kinds
 
@@ -698,7 +698,7 @@ class ProjectivePathIntegrator(PathIntegrator):
             rr = depth >= self.rr_depth
             survive = rng.next_float32() < q
             beta[rr] = beta * dr.rcp(q)
-            active = hit & (bs.pdf > 0) & (b_max > 0) & (~rr | survive) & (depth < deepest)
+            active = hit & (bs.pdf > 0) & nonzero(beta) & (~rr | survive) & (depth < deepest)
             rng_state = rng.loop_state()
         rng.set_loop_state(rng_state)
         found = chosen > 0

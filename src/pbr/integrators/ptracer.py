@@ -13,7 +13,7 @@ from ..bsdfs.base import ShadingContext
 from ..samplers import IndependentSampler, IndependentStream, seed_array
 from ..spectrum import SampledWavelengths, first_only
 from ..plugins.props import SceneError
-from .base import INTEGRATORS, SamplingIntegrator, _progress, loop_ray, ray_state
+from .base import INTEGRATORS, SamplingIntegrator, _progress, loop_ray, nonzero, ray_state
 from .lightpath import (SplatFilm, connect_to_camera, lens_sample, sample_importance, shading_correction,
                         start_light_path)
 
@@ -139,7 +139,7 @@ class ParticleTracerIntegrator(SamplingIntegrator):
         # plain ifs, so that the excluded variables they read stay outside.
         eta = mi.Float(1.0) if bsdfs.refracts else None
         terminated = mi.Bool(False) if dispersive else None
-        active = mi.Bool(active) & (ls.pdf_dir > 0) & (dr.max(beta) > 0) & (depth < max_depth)
+        active = mi.Bool(active) & (ls.pdf_dir > 0) & nonzero(beta) & (depth < max_depth)
         ray_var, ray_fixed = ray_state(ray, extent=False)   # spawned rays: the largest extent
         rng_state = rng.loop_state()
 
@@ -169,7 +169,7 @@ class ParticleTracerIntegrator(SamplingIntegrator):
                 term = active & bs.terminate & ~terminated
                 beta[term] = first_only(beta)
                 terminated |= term
-            active &= side_ok & (bs.pdf > 0) & (dr.max(beta) > 0)
+            active &= side_ok & (bs.pdf > 0) & nonzero(beta)
             depth += 1
             active &= depth < max_depth
 

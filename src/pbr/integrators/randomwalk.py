@@ -20,7 +20,7 @@ import drjit as dr
 import mitsuba as mi
 
 from ..bsdfs.base import ShadingContext
-from .base import INTEGRATORS, SamplingIntegrator, loop_ray, path_state, pbrt_max_depth, ray_state
+from .base import INTEGRATORS, SamplingIntegrator, loop_ray, nonzero, path_state, pbrt_max_depth, ray_state
 from .direct import add_unweighted_emission
 
 
@@ -82,7 +82,7 @@ class RandomWalkIntegrator(SamplingIntegrator):
             ray = dr.select(through, si.spawn_ray(ray.d), si.spawn_ray(wp))
             ray_var = ray_state(ray)[0]
             depth[hit & ~skip] = depth + 1
-            active = through | (go & dr.any(beta != 0.0))
+            active = through | (go & nonzero(beta))
             rng_state = rng.loop_state()
         rng.set_loop_state(rng_state)
         return L, valid

@@ -24,7 +24,7 @@ import mitsuba as mi
 
 from ..bsdfs.base import REFLECTION, TRANSMISSION, ShadingContext
 from ..spectrum import first_only
-from .base import INTEGRATORS, SamplingIntegrator, light_reaches, loop_ray, path_state, pbrt_max_depth, ray_state
+from .base import INTEGRATORS, SamplingIntegrator, light_reaches, loop_ray, nonzero, path_state, pbrt_max_depth, ray_state
 from .direct import add_unweighted_emission
 
 # How a direction is drawn without BSDF sampling (per BSDF entry).
@@ -148,7 +148,7 @@ class SimplePathIntegrator(SamplingIntegrator):
             ray = dr.select(through, si.spawn_ray(ray.d), si.spawn_ray(wi))
             ray_var = ray_state(ray)[0]
             depth[hit & ~skip] = depth + 1
-            active = through | (scatter & dr.any(beta != 0.0))
+            active = through | (scatter & nonzero(beta))
             rng_state = rng.loop_state()
         rng.set_loop_state(rng_state)
         return L, valid

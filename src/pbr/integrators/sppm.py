@@ -19,7 +19,7 @@ from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..samplers import IndependentSampler
 from ..sampling import power_heuristic
 from ..spectrum import SampledWavelengths, first_only
-from .base import INTEGRATORS, SamplingIntegrator, _progress, emitted_mis, light_reaches, mis_state, path_state
+from .base import INTEGRATORS, SamplingIntegrator, _progress, emitted_mis, light_reaches, mis_state, nonzero, path_state
 from .lightpath import sample_importance, shading_correction, start_light_path
 
 UNLIMITED = 0xFFFFFFF0
@@ -345,7 +345,7 @@ class SPPMIntegrator(SamplingIntegrator):
             rr = (rr_beta < 1.0) & ~skip
             survive = rng.next_float32() >= q
             beta[rr] = beta * dr.rcp(1.0 - q)
-            active = skip | (cont & (~rr | survive) & (dr.max(beta) > 0))
+            active = skip | (cont & (~rr | survive) & nonzero(beta))
 
         vp_ray = mi.Ray3f(vp_o, vp_d, vp_t, 0.0, mi.Spectrum(0.0))
         return L, vp_ray, vp_beta, vp_depth, found, vp_term
@@ -406,7 +406,7 @@ class SPPMIntegrator(SamplingIntegrator):
         depth = mi.UInt32(0)               # photon hit index k (0: first hit, direct light)
         terminated = mi.Bool(False)
         dispersive = bsdfs.dispersive
-        active = (les.pdf_dir > 0) & (dr.max(beta) > 0)
+        active = (les.pdf_dir > 0) & nonzero(beta)
 
         while dr.hint(active, label="sppm_photon"):
             si, shape = geo.intersect(ray, active)
@@ -433,7 +433,7 @@ class SPPMIntegrator(SamplingIntegrator):
             ray = si.spawn_ray(wo)
             depth += 1
             # Deposits at hit k need v + k <= bounces with v >= 1.
-            active = hit & side_ok & (bs.pdf > 0) & survive & (depth + 1 <= bounces) & (dr.max(beta) > 0)
+            active = hit & side_ok & (bs.pdf > 0) & survive & (depth + 1 <= bounces) & nonzero(beta)
 
     @dr.syntax
     def _deposit(self, grid, vp, r2, phi, m, bsdfs, p, wi, beta, k, wl, terminated, active):

@@ -15,7 +15,7 @@ from ..bsdfs.base import ShadingContext, shading_context
 from ..lights.lightsamplers import LIGHT_SAMPLERS
 from ..spectrum import first_only
 from . import subsurface, volume
-from .base import INTEGRATORS, ConditionalState, SamplingIntegrator, depth_limit, mis_state, nonzero_estimate, path_state
+from .base import INTEGRATORS, ConditionalState, SamplingIntegrator, depth_limit, mis_state, nonzero, nonzero_estimate, path_state
 
 
 def _null_weights(f, r_u, r_l, T_acc, sigma_n, sigma_maj, inv_pdf, mask):
@@ -154,7 +154,7 @@ class VolPathIntegrator(_MediumAware):
         n_null, capped = self._count_null(n_null, is_null)
         absorbed |= is_abs | capped
         scattered |= is_sca
-        stop = is_abs | is_sca | capped | ~((dr.max(beta) > 0) & (dr.max(r_u) > 0))
+        stop = is_abs | is_sca | capped | ~(nonzero(beta) & nonzero(r_u))
         return (L, beta, r_u, r_l, T_acc, p_sc, scattered, absorbed, n_null), stop
 
     def _ratio_tracking(self, state, c, rng, media):
@@ -315,7 +315,7 @@ class VolPathIntegrator(_MediumAware):
                 beta[through] = beta * f
                 r_u[through] = r_u * f
                 r_l[through] = r_l * f
-                absorbed |= in_m & ((dr.max(beta) <= 0) | (dr.max(r_u) <= 0))
+                absorbed |= in_m & (~nonzero(beta) | ~nonzero(r_u))
                 n_null[active] = 0
 
             # -- surface reached (or the ray escaped) --------------------------------------
@@ -389,7 +389,7 @@ class VolPathIntegrator(_MediumAware):
             rr = cont & (depth >= self.rr_depth)
             survive = rng.next_float32() < q
             beta[rr] = beta * dr.rcp(q)
-            active = skip | (cont & (~rr | survive) & (dr.max(beta) > 0))
+            active = skip | (cont & (~rr | survive) & nonzero(beta))
             cond_state = cond.update(r_u=r_u, n_null=n_null, medium=medium)
             rng_state = rng.loop_state()
 
@@ -487,7 +487,7 @@ class SimpleVolPathIntegrator(_MediumAware):
             beta[cont] = beta * weight[0]
             ray, medium = volume.next_ray(scene, shape, si, ray, medium, wi, p_sc, sc, cont, rs, skip)
             depth[at_vertex] = depth + 1
-            active = skip | (cont & (beta > 0))
+            active = skip | (cont & nonzero(beta))
             cond_state = cond.update(medium=medium)
             rng_state = rng.loop_state()
         rng.set_loop_state(rng_state)
