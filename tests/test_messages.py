@@ -157,6 +157,12 @@ def test_render_names_a_scene_that_is_not_loaded():
         pbr.render(pbr.cornell_box(8, 1))
 
 
+def test_render_names_params_that_are_not_parameters():
+    """``params=5`` was ignored without a word when no parameter had gradients."""
+    with pytest.raises(TypeError, match=r"^render: params: expected the scene's parameters .*got int 5$"):
+        pbr.render(pbr.load_dict(pbr.cornell_box(8, 1)), params=5)
+
+
 @pytest.mark.parametrize("body, message", [
     ('WorldBegin\nShapee "sphere" "float radius" 1\n', r":2: unknown directive 'Shapee' \(did you mean 'Shape'\?\)$"),
     ('Shape "sphere"\nWorldBegin\n', r":1: Shape: must come after WorldBegin"),

@@ -145,6 +145,9 @@ def render(scene, params=None, sensor=0, integrator=None, seed=0, seed_grad=0, s
     relative errors (with neither of the two, of a uniform ``spp`` render: the same
     samples as without it)."""
     _check_scene(scene)
+    if params is not None and not callable(getattr(params, "items", None)):
+        raise TypeError(f"render: params: expected the scene's parameters (pbr.traverse(scene)) or a dict of "
+                        f"them, got {type(params).__name__} {params!r}")
     scene.geometry.check_current()    # (before any symbolic loop: its abort leaves Dr.Jit unclean)
     integrator = scene.integrator if integrator is None else as_integrator(integrator)
     spp, spp_grad = _count("spp", spp), _count("spp_grad", spp_grad)
