@@ -297,12 +297,19 @@ def mitsuba_variant() -> str:
     return _backend.variant()
 
 
-def mitsuba_render_fn(scene_dict: dict, sensor: int = 0) -> Callable[..., np.ndarray]:
-    """Load ``scene_dict`` with Mitsuba once; return ``render(seed, spp) -> float32 (H, W, 3)``."""
+def mitsuba_render_fn(scene_dict: dict | str, sensor: int = 0, **params) -> Callable[..., np.ndarray]:
+    """Load ``scene_dict`` with Mitsuba once (a ``str`` is an XML file, loaded with
+    ``mi.load_file(path, **params)``, ``params`` overriding its ``<default>`` values);
+    return ``render(seed, spp) -> float32 (H, W, 3)``."""
     import mitsuba as mi
 
     mitsuba_variant()
-    scene = mi.load_dict(scene_dict)
+    if isinstance(scene_dict, str):
+        scene = mi.load_file(scene_dict, **params)
+    elif params:
+        raise TypeError(f"mitsuba_render_fn: parameters {sorted(params)} only apply to an XML file")
+    else:
+        scene = mi.load_dict(scene_dict)
 
     def render(seed: int = 0, spp: int = 0) -> np.ndarray:
         img = np.asarray(mi.render(scene, spp=spp, seed=seed, sensor=sensor), dtype=np.float32)

@@ -33,8 +33,9 @@ from ..plugins.params import ParamOwner, param_table
 from ..plugins.props import ALBEDO, HG_ASYMMETRY, NONNEGATIVE, Props, Range, SceneError, did_you_mean
 from ..plugins.registry import Registry
 from ..textures import CONSTANT, load_spectrum
+from ..textures.grid import GridTable, as_grid, load_gridvolume
 from .cloud import cloud_density
-from .grid import GridTable, MAJORANT_RES, as_grid, cell_maxima, read_vol
+from .grid import MAJORANT_RES, cell_maxima
 
 # Type name -> the MediumSet method that parses a medium of that type.
 MEDIUM_TYPES = Registry("medium")
@@ -176,26 +177,7 @@ class MediumSet:
         return self._spectrum(loader, props, name, default, bounded=(form == "albedo")), NO_GRID
 
     def _gridvolume(self, loader, p: Props, form, path):
-        if p.has("filename"):
-            data, bbox = read_vol(loader.resolve_path(p.string("filename"), p.key("filename")))
-        elif p.has("data"):
-            data, bbox = as_grid(np.asarray(p.raw("data")), p.key("data")), np.array([[0, 0, 0], [1, 1, 1.0]])
-        else:
-            raise p.error(None, "a gridvolume needs 'filename' or 'data'")
-        if not np.all(np.isfinite(data)) or np.any(data < 0):
-            raise p.error("filename" if p.has("filename") else "data", "grid values must be finite and >= 0")
-        p.string("filter_type", "trilinear", choices=("trilinear",))
-        p.string("wrap_mode", "clamp", choices=("clamp",))
-        to_world = p.transform("to_world")
-        if p.bool("use_grid_bbox", False):
-            lo, hi = bbox[0], bbox[1]
-            box = np.diag([*(hi - lo), 1.0])
-            box[:3, 3] = lo
-            to_world = to_world @ box
-        if p.has("raw") and p.bool("raw"):
-            raise p.error("raw", "raw=true grids are not supported (RGB grids are upsampled to spectra)")
-        p.mark("accel", "max_value")
-        p.finish()
+        data, to_world = load_gridvolume(loader, p)
         try:
             to_local = np.linalg.inv(to_world)
         except np.linalg.LinAlgError:

@@ -13,7 +13,7 @@ import numpy as np
 from .. import spectrum as spec
 
 # Slot kinds.
-CONSTANT, CHECKERBOARD, BITMAP, COMPOSITE, MESH_ATTRIBUTE, PROCEDURAL, MIPMAP = 0, 1, 2, 3, 4, 5, 6
+CONSTANT, CHECKERBOARD, BITMAP, COMPOSITE, MESH_ATTRIBUTE, PROCEDURAL, MIPMAP, VOLUME = 0, 1, 2, 3, 4, 5, 6, 7
 # Composite operations.
 OP_SCALE, OP_MIX, OP_CHECKER, OP_SQRT = 0, 1, 2, 3
 # Base spectrum of a constant.

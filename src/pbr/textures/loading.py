@@ -28,7 +28,8 @@ from ..image import linear_to_srgb, read_image
 from ..plugins.params import check_params
 from ..plugins.props import ALBEDO, FINITE, RADIANCE, UNIT, Props, Range, SceneError, did_you_mean
 from ..plugins.registry import Registry
-from . import meshattr, mipmap, procedural
+from . import meshattr, mipmap, procedural, volume
+from .grid import load_gridvolume
 from .kinds import (BASE_ONE, BASE_SIGMOID, BASE_TABLE, CONSTANT, OP_CHECKER, OP_MIX, OP_SCALE, OP_SQRT, TAB_N,
                     Bitmap, Checkerboard, Composite, ConstantSpectrum, MeshAttribute)
 
@@ -736,6 +737,38 @@ def _rawconstant(loader, p, form, emitter, unbounded):
     texel = vec.reshape(1, 1, 3)
     rgb = np.clip(texel, 0.0, 1.0) if form == "albedo" else texel
     return loader.textures.add(Bitmap(p.path, rgb, "nearest", "clamp", np.eye(4), form, texel.copy()))
+
+
+@TEXTURE_TYPES.register("volume")
+def _volume(loader, p, form, emitter, unbounded):
+    """``volume`` (Mitsuba's): a ``gridvolume``'s value at the surface point's world
+    position (see :mod:`pbr.textures.volume`; clamped outside the grid's box).
+
+    ======  ======  ========  =====================================================
+    name    type    default   meaning
+    ======  ======  ========  =====================================================
+    volume  volume  -         a ``gridvolume`` (``filename`` or ``data``, ``to_world``,
+                              ``use_grid_bbox``) or a ``constvolume`` (required)
+    ======  ======  ========  =====================================================
+    """
+    v = p.raw("volume", None)
+    if not isinstance(v, dict) or v.get("type") not in ("gridvolume", "constvolume"):
+        raise p.error("volume", f"expected a gridvolume or constvolume, got "
+                                f"{v.get('type') if isinstance(v, dict) else v!r}")
+    vp = Props(v, p.key("volume"), loader)
+    if vp.type == "constvolume":   # a constant: the texture is its value
+        vp.transform("to_world")
+        slot = load_spectrum(loader, vp.raw("value", 1.0), vp.key("value"), emitter, unbounded)
+        vp.finish()
+        p.finish()
+        return slot
+    data, to_world = load_gridvolume(loader, vp)
+    p.finish()
+    try:
+        grid_from_world = np.linalg.inv(to_world)
+    except np.linalg.LinAlgError:
+        raise vp.error("to_world", "the grid transform is singular") from None
+    return loader.textures.add(volume.VolumeTexture(p.path, data, grid_from_world, form))
 
 
 @TEXTURE_TYPES.register("mesh_attribute")

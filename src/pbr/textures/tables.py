@@ -97,6 +97,12 @@ class MipmapTable:
 
 
 @dataclass
+class VolumeTable:
+    grids: object = None        # a grid.GridTable, grid i = volume texture i
+    m: object = None            # grid-from-world, 12 rows (3x4)
+
+
+@dataclass
 class TextureTables:
     slot_kind: object = None    # slot -> kind
     slot_index: object = None   # slot -> index within its kind's table
@@ -107,3 +113,4 @@ class TextureTables:
     mesh_attributes: MeshAttributeTable | None = None
     procedurals: ProceduralTable | None = None
     mipmaps: MipmapTable | None = None
+    volumes: VolumeTable | None = None

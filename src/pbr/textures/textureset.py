@@ -26,9 +26,9 @@ import numpy as np
 
 from .. import dispatch
 from .. import spectrum as spec
-from . import meshattr, mipmap, procedural
+from . import meshattr, mipmap, procedural, volume
 from .kinds import (BASE_SIGMOID, BASE_TABLE, BITMAP, CHECKERBOARD, COMPOSITE, CONSTANT, MESH_ATTRIBUTE, MIPMAP,
-                    OP_CHECKER, OP_MIX, OP_SCALE, OP_SQRT, PROCEDURAL, TAB_N, Bitmap, Checkerboard, Composite,
+                    OP_CHECKER, OP_MIX, OP_SCALE, OP_SQRT, PROCEDURAL, TAB_N, VOLUME, Bitmap, Checkerboard, Composite,
                     ConstantSpectrum, MeshAttribute)
 from .tables import BitmapTable, CheckerTable, CompositeTable, ConstantTable, TextureTables
 
@@ -45,6 +45,7 @@ class TextureSet:
         self.mesh_attrs: list[int] = []
         self.procedurals: list[int] = []
         self.mipmaps: list[int] = []
+        self.volumes: list[int] = []
         # (camera, spp) of the render under way: the pixel footprint of procedural and
         # MIP-mapped textures (set by the integrator; None: no footprint, no filtering)
         self.footprint = None
@@ -65,7 +66,7 @@ class TextureSet:
 
     def _kind_lists(self) -> tuple:
         return (self.constants, self.checkers, self.bitmaps, self.composites, self.mesh_attrs, self.procedurals,
-                self.mipmaps)
+                self.mipmaps, self.volumes)
 
     @property
     def needs_footprint(self) -> bool:
@@ -132,7 +133,7 @@ class TextureSet:
             return 0.5 * float(t.params["scale"][0])
         if isinstance(t, procedural.Procedural):
             return 0.5
-        if isinstance(t, mipmap.MipMap):
+        if isinstance(t, (mipmap.MipMap, volume.VolumeTexture)):
             return t.mean_luminance()
         return float(np.mean(spec.luminance_rgb(np.moveaxis(np.array(t.params["data"]), -1, 0)[:3])))
 
@@ -210,6 +211,8 @@ class TextureSet:
             items = [self.items[s] for s in self.mipmaps]
             T.mipmaps = mipmap.build_table(items)
             self.mipmap_info = mipmap.static_info(items)
+        if self.volumes:
+            T.volumes = volume.build_table([self.items[s] for s in self.volumes])
         dr.eval(T)
         self.tables = T
         self.bases = {c.base for c in consts}
@@ -243,7 +246,7 @@ class TextureSet:
                 elif isinstance(t, Checkerboard):
                     todo.extend((t.color0, t.color1))
         by = {k: sorted(s for s in slots if self.kind_of(s) == k)
-              for k in (CONSTANT, CHECKERBOARD, BITMAP, COMPOSITE, MESH_ATTRIBUTE, PROCEDURAL, MIPMAP)}
+              for k in (CONSTANT, CHECKERBOARD, BITMAP, COMPOSITE, MESH_ATTRIBUTE, PROCEDURAL, MIPMAP, VOLUME)}
         consts = [self.items[s] for s in by[CONSTANT]]
         composites = by[COMPOSITE]
         depth = max((self.depth_of(s) for s in composites), default=0)
@@ -262,7 +265,8 @@ class TextureSet:
         f = SimpleNamespace(
             leaf_kinds={self.kind_of(s) for s in slots if self.kind_of(s) != COMPOSITE},
             constants=by[CONSTANT], checkers=by[CHECKERBOARD], bitmaps=by[BITMAP], composites=composites,
-            mesh_attrs=by[MESH_ATTRIBUTE], procedurals=by[PROCEDURAL], mipmaps=by[MIPMAP], n_leaves=len(slots) - len(composites),
+            mesh_attrs=by[MESH_ATTRIBUTE], procedurals=by[PROCEDURAL], mipmaps=by[MIPMAP], volumes=by[VOLUME],
+            n_leaves=len(slots) - len(composites),
             bases=bases, has_sigmoid=BASE_SIGMOID in bases, has_table=BASE_TABLE in bases,
             has_d65=any(c.form == "illuminant" for c in consts) or any(
                 self.items[s].form == "illuminant" for s in by[BITMAP]),
@@ -511,7 +515,8 @@ class TextureSet:
         return result
 
     def _eval_leaf(self, slot, uv, lam, active, illuminant, si=None, f=None):
-        """A constant, checkerboard (of constants), bitmap or mesh-attribute slot."""
+        """A constant, checkerboard (of constants), bitmap, mesh-attribute, procedural,
+        MIP-mapped or volume slot."""
         f = f or self.features()
         T = self.tables
         if len(f.leaf_kinds) == 1:      # the kind of every lane (inactive lanes do not matter)
@@ -520,7 +525,7 @@ class TextureSet:
             kind = dr.gather(mi.UInt32, T.slot_kind, slot, active)
         # With constants only (in the whole set), slots are constant-table indices already.
         only_constants = not (self.checkers or self.bitmaps or self.composites or self.mesh_attrs
-                                or self.procedurals or self.mipmaps)
+                                or self.procedurals or self.mipmaps or self.volumes)
         idx = slot if only_constants else dr.gather(mi.UInt32, T.slot_index, slot, active)
         result = mi.Spectrum(0.0)
         if f.constants:
@@ -534,7 +539,8 @@ class TextureSet:
                 c1 = dr.gather(mi.UInt32, T.checkers.color1, idx, is_ck)
                 ci = dr.select(is_ck, dr.select(same, c0, c1), idx)
             on = active & (kind != BITMAP)
-            for k, lst in ((MESH_ATTRIBUTE, f.mesh_attrs), (PROCEDURAL, f.procedurals), (MIPMAP, f.mipmaps)):
+            for k, lst in ((MESH_ATTRIBUTE, f.mesh_attrs), (PROCEDURAL, f.procedurals), (MIPMAP, f.mipmaps),
+                           (VOLUME, f.volumes)):
                 if lst:
                     on &= kind != k
             result = self._eval_constant(ci, lam, on, illuminant, f)
@@ -555,6 +561,9 @@ class TextureSet:
         if f.mipmaps:
             is_mm = active & (kind == MIPMAP)
             result = dr.select(is_mm, mipmap.evaluate(self, idx, uv, si, lam, is_mm, illuminant), result)
+        if f.volumes:
+            is_vo = active & (kind == VOLUME)
+            result = dr.select(is_vo, volume.evaluate(self, idx, uv, si, lam, is_vo), result)
         if f.mesh_attrs and self.mesh_data and si is not None:   # elsewhere mesh attributes are 0
             is_ma = active & (kind == MESH_ATTRIBUTE)
             result = dr.select(is_ma, meshattr.evaluate(self, idx, si, lam, is_ma), result)
