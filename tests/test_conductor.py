@@ -149,3 +149,33 @@ def test_fresnel_conductor_holds_down_to_n_zero():
     ref[:100] = 1.0                                 # n = 0: the 0/0 at c = 0 and 1 tends to 1
     assert np.all(np.isfinite(r)) and r.min() >= 0 and r.max() <= 1.0
     assert np.abs(r - ref).max() < 2e-4
+
+
+@pytest.mark.parametrize("wrt", ["k", "eta"])
+def test_fresnel_conductor_derivative_at_k_or_eta_zero(wrt):
+    """d R / d k at k = 0 (and d R / d eta at eta = 0), the bound of their range, is the
+    one-sided derivative from above: a float64 forward difference of the formula. The
+    complex square root's |Im(n^2 - sin^2)| = |2 eta k| had dr.abs's derivative, 0 at 0,
+    so the derivative lost the root's imaginary-part term there (on a rough gold-like floor
+    at eta = k = 0.5, d image / d k at k = 0 was -0.381 where differences give -0.727 and
+    the derivative at k = 1e-3 is -0.735)."""
+    from pbr.bsdfs.fresnel import fresnel_conductor
+    c = np.linspace(0.02, 1.0, 50)
+    other = np.full_like(c, 0.5)
+
+    def ref(x):
+        eta, k = (x, other) if wrt == "eta" else (other, x)
+        m = eta + 1j * k
+        w = np.sqrt(m * m - (1 - c * c) + 0j)
+        return 0.5 * (np.abs((c - w) / (c + w)) ** 2 + np.abs((m * m * c - w) / (m * m * c + w)) ** 2)
+
+    h = 1e-7
+    fd = (ref(np.full_like(c, h)) - ref(np.zeros_like(c))) / h
+    x = mi.Float(np.zeros_like(c))
+    dr.enable_grad(x)
+    eta, k = (x, mi.Float(other)) if wrt == "eta" else (mi.Float(other), x)
+    r = fresnel_conductor(mi.Float(c), eta, k)
+    dr.forward(x)
+    g = np.array(dr.grad(r))
+    assert np.all(np.isfinite(g))
+    assert np.abs(g - fd).max() < 1e-3 * np.abs(fd).max() + 1e-4, (g, fd)

@@ -57,7 +57,11 @@ def _csqrt(re, im):
     sqrt((|z| + |re|) / 2) and the smaller |im| / (2 * larger): no cancellation of
     |z| - |re| when |im| << |re| (a conductor with small k under total internal reflection)."""
     big = dr.safe_sqrt(0.5 * (dr.sqrt(dr.fma(re, re, im * im)) + dr.abs(re)))
-    small = dr.select(big > 0, 0.5 * dr.abs(im) / big, 0.0)
+    # |im| written as a select so that at im = 0 it keeps im's derivative (dr.abs's is 0
+    # there): the one-sided derivative at k = 0 or eta = 0 of a conductor, whose im =
+    # 2 eta k >= 0; d R / d k at k = 0 was about half the finite difference
+    abs_im = dr.select(im < 0, -im, im)
+    small = dr.select(big > 0, 0.5 * abs_im / big, 0.0)
     pos = re >= 0
     a, b = dr.select(pos, big, small), dr.select(pos, small, big)
     return a, dr.select(im < 0, -b, b)
