@@ -16,7 +16,7 @@ import mitsuba as mi
 
 from .. import dispatch
 from ..plugins.props import UNIT, SceneError, did_you_mean
-from ..spectrum import luminance_rgb
+from ..spectrum import clamp_keep_grad, luminance_rgb
 from ..textures import load_spectrum
 from . import perturb
 from .base import BSDF_TYPES, BSDFSample, BSDFType, DIFFUSE, GLOSSY, TRANSMISSION
@@ -499,7 +499,9 @@ class BSDFSet:
             w = self.textures.eval(slot, ctx.si, ctx.wl.lambda_, is_blend, illuminant=False, reach=self.blend_reach)[0]
             a = dr.select(is_blend, dr.gather(mi.UInt32, self.blend_a, bsdf_id, is_blend), bsdf_id)
             b = dr.gather(mi.UInt32, self.blend_b, bsdf_id, is_blend)
-            return a, b, mi.Float(dr.select(is_blend, dr.clip(w, 0.0, 1.0), 0.0))
+            # (the clip keeps w's derivative: at a weight of 0 or 1, dr.clip's is 0 and an
+            # optimiser starting from one component alone could never leave it)
+            return a, b, mi.Float(dr.select(is_blend, clamp_keep_grad(w, 0.0, 1.0), 0.0))
         a, b, w = dispatch.when_any(is_blend, lookup, otherwise=(mi.UInt32(bsdf_id), mi.UInt32(0), mi.Float(0.0)),
                                     label="blend weight")
         return a, b, w, is_blend
