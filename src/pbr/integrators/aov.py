@@ -5,7 +5,6 @@ Types and conventions: docs/integrators.md.
 
 from __future__ import annotations
 
-import drjit as dr
 import mitsuba as mi
 
 from .. import spectrum as spec

@@ -44,7 +44,6 @@ from .. import backend
 from ..bsdfs import BSDF_TYPES
 from ..cameras import SENSORS
 from ..films import FILMS, camera_sensors
-from ..filters import FILTERS
 from ..integrators import INTEGRATORS
 from ..lights import LIGHT_TYPES
 from ..lights.goniometric import equal_area_sphere_to_square
