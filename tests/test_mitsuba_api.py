@@ -362,6 +362,25 @@ def test_bad_sensor_and_film_updates_name_the_key():
     assert list(p["sensor.film.size"]) == [8, 8] and p.flags("sensor.film.size") & int(mi.ParamFlags.ReadOnly)
 
 
+def test_later_mitsubas_mesh_keys_point_to_mitsuba_3_9s():
+    """The current Mitsuba tutorials write ``<mesh>.positions`` (a later Mitsuba's (N, 3)
+    tensor); the error names the Mitsuba 3.9 key pbr has and how to convert."""
+    p = pbr.traverse(pbr.load_dict(pbr.cornell_box(8, 4)))
+    for last in ("positions", "normals", "texcoords"):
+        with pytest.raises(KeyError, match=rf"'small-box.vertex_{last}', a flat array.*dr.unravel"):
+            p[f"small-box.{last}"]
+    with pytest.raises(KeyError) as e:
+        p["red.positions"]           # a BSDF: no hint
+    assert "vertex_" not in str(e.value).split("known keys")[0]
+
+
+def test_sample_border_error_says_what_to_do():
+    d = pbr.cornell_box(8, 4)
+    d["sensor"]["film"]["sample_border"] = True
+    with pytest.raises(pbr.SceneError, match="sensor.film.sample_border.*Mitsuba's default.*remove the entry"):
+        pbr.load_dict(d)
+
+
 # -- SceneParameters' methods ------------------------------------------------------------------
 def test_scene_parameters_methods_follow_mitsuba():
     scene = pbr.load_dict(pbr.cornell_box(8, 4))

@@ -78,7 +78,10 @@ class HDRFilm:
         props.string("component_format", "float32", choices=("float16", "float32"))
         props.string("file_format", "openexr", choices=("openexr", "exr"))
         if props.bool("sample_border", False):
-            raise props.error("sample_border", "sample_border=true is not supported")
+            raise props.error("sample_border", "sample_border=true is not supported: pbr's films drop "
+                              "samples whose filter offset leaves the image (Mitsuba's default, "
+                              "sample_border=false); remove the entry (only pixels within the "
+                              "filter's radius of the image's edge differ)")
 
     def _window(self, props: Props) -> None:
         """Mitsuba's ``width``/``height`` and crop window (which must lie inside the film)."""

@@ -214,6 +214,23 @@ def rename_key_paths(owners, paths: dict) -> None:
                 break
 
 
+
+# Mesh keys of Mitsuba after 3.9 (its redesigned Mesh class, which the current Mitsuba
+# tutorials use: (N, 3) tensors) and their Mitsuba 3.9 names (flat arrays), which pbr has.
+_NEWER_MESH_KEYS = {"positions": "vertex_positions", "normals": "vertex_normals",
+                    "texcoords": "vertex_texcoords"}
+
+
+def _newer_mesh_key_hint(key, known) -> str:
+    """For ``<mesh>.positions`` (and normals, texcoords): the Mitsuba 3.9 key pbr has."""
+    head, _, last = key.rpartition(".")
+    old = f"{head}.{_NEWER_MESH_KEYS.get(last, '')}"
+    if not head or last not in _NEWER_MESH_KEYS or old not in known:
+        return ""
+    return (f" (pbr uses Mitsuba 3.9's mesh keys: {old!r}, a flat array x0, y0, z0, x1, ...; "
+            f"dr.unravel(mi.Point3f, params[{old!r}]) gives the points, dr.ravel(points) "
+            f"sets them. '{last}' as an (N, 3) tensor is a later Mitsuba's name)")
+
 class _Param:
     """One key: how to read and write it, its Mitsuba flags, and what it belongs to."""
 
@@ -422,7 +439,8 @@ class SceneParameters:
     def _param(self, key) -> _Param:
         if key not in self._params:
             near = [k for k in self._params if key.split(".")[0] == k.split(".")[0]] or list(self._params)
-            raise KeyError(f"{key!r} is not a parameter of this scene; known keys: {', '.join(near)}")
+            raise KeyError(f"{key!r} is not a parameter of this scene{_newer_mesh_key_hint(key, self._params)}; "
+                           f"known keys: {', '.join(near)}")
         return self._params[key]
 
     def __getitem__(self, key):
