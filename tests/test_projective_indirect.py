@@ -97,3 +97,43 @@ def test_shadow_seen_in_a_glossy_floor():
     print(f"shadow in a glossy floor: pbr {ad}, FD {fd}, first hit only {no_depth_2}")
     assert _z(ad, fd) < Z_MAX and abs(ad[0] - fd[0]) < 0.2 * abs(fd[0]), (ad, fd)
     assert _z(no_depth_2, fd) > 3 * Z_MAX, (no_depth_2, fd)
+
+
+def test_finely_tessellated_light_keeps_the_edge_weights_small(tmp_path, monkeypatch):
+    """An emissive mesh of many vertices (the Mitsuba tutorials' sphere.obj has 16,258)
+    marks its shadow-casting edges from at most LIGHT_VIEWPOINTS of its vertices and its
+    centroid: one silhouette test per vertex built a kernel that did not finish tracing in
+    6 minutes (object_pose_estimation)."""
+    import drjit as dr
+    from pbr.integrators import projective
+    n = 12                                    # a 12 x 12 vertex grid: 144 vertices
+    lines = [f"v {i / (n - 1) * 2 - 1} {j / (n - 1) * 2 - 1} 0" for j in range(n) for i in range(n)]
+    lines += [f"f {j * n + i + 1} {j * n + i + 2} {(j + 1) * n + i + 2} {(j + 1) * n + i + 1}"
+              for j in range(n - 1) for i in range(n - 1)]
+    (tmp_path / "grid.obj").write_text("\n".join(lines) + "\n")
+    d = shadow_in_a_reflection(res=4)
+    d["lamp"] = {"type": "obj", "filename": str(tmp_path / "grid.obj"), "to_world": d["lamp"]["to_world"],
+                 "emitter": d["lamp"]["emitter"]}
+    calls, inside = [], []
+    silhouette, distribution = projective.silhouette, projective.ProjectivePathIntegrator._edge_distribution
+
+    def counted(*a):
+        calls.append(bool(inside))
+        return silhouette(*a)
+
+    def edge_distribution(*a):
+        inside.append(1)
+        try:
+            return distribution(*a)
+        finally:
+            inside.pop()
+    monkeypatch.setattr(projective, "silhouette", counted)
+    monkeypatch.setattr(projective.ProjectivePathIntegrator, "_edge_distribution", edge_distribution)
+    scene = pbr.load_dict(d)
+    p = pbr.traverse(scene)
+    dr.enable_grad(p["wall.to_world"])
+    p.update()
+    img = pbr.render(scene, p, spp=1)
+    dr.backward(dr.sum(img, axis=None))
+    marked = sum(calls)                       # the light's viewpoints: vertices + centroid
+    assert 0 < marked <= projective.LIGHT_VIEWPOINTS + 1, marked

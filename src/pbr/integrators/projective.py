@@ -97,6 +97,11 @@ ANGLE_EPS = 1e-4
 COPLANAR = 1e-6
 # Relative probability of edges that are silhouettes seen from an emitter's vertices.
 LIGHT_BOOST = 16.0
+# At most this many of an emitter's vertices (evenly spaced in its vertex list) are the
+# viewpoints of that test: each is one silhouette test of every edge in one kernel, and a
+# finely tessellated light (the Mitsuba tutorials' 16k-vertex sphere.obj) made that
+# kernel too large to trace in minutes. The choice only shapes a sampling probability.
+LIGHT_VIEWPOINTS = 32
 # Indirect term: candidate edge points per sample (resampled importance sampling), and the
 # target's weight of directions that do not point at an emitter (x10 where the rest of the
 # path has more than one segment: jumps may come from indirect light).
@@ -743,7 +748,7 @@ class ProjectivePathIntegrator(PathIntegrator):
                     centre = q.mean(axis=0)
                     self._spheres.append((*centre.tolist(), float(np.linalg.norm(q - centre, axis=1).max()) * 1.001))
                 if edges.emitting:
-                    lights = [pts[lo:hi] for lo, hi in edges.emitting]
+                    lights = [pts[lo:hi][::-(-(hi - lo) // LIGHT_VIEWPOINTS)] for lo, hi in edges.emitting]
                     lights = np.concatenate(lights + [np.mean(x, axis=0, keepdims=True) for x in lights])
                     mark = mi.Bool(False)
                     for q in lights.tolist():
