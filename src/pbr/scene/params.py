@@ -214,7 +214,6 @@ def rename_key_paths(owners, paths: dict) -> None:
                 break
 
 
-
 # Mesh keys of Mitsuba after 3.9 (its redesigned Mesh class, which the current Mitsuba
 # tutorials use: (N, 3) tensors) and their Mitsuba 3.9 names (flat arrays), which pbr has.
 _NEWER_MESH_KEYS = {"positions": "vertex_positions", "normals": "vertex_normals",
@@ -230,6 +229,7 @@ def _newer_mesh_key_hint(key, known) -> str:
     return (f" (pbr uses Mitsuba 3.9's mesh keys: {old!r}, a flat array x0, y0, z0, x1, ...; "
             f"dr.unravel(mi.Point3f, params[{old!r}]) gives the points, dr.ravel(points) "
             f"sets them. '{last}' as an (N, 3) tensor is a later Mitsuba's name)")
+
 
 class _Param:
     """One key: how to read and write it, its Mitsuba flags, and what it belongs to."""
