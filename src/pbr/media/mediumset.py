@@ -223,8 +223,8 @@ class MediumSet:
         =======  ======  =======  =============================================================
         name     type    default  meaning
         =======  ======  =======  =============================================================
-        sigma_t  volume  1        extinction: a spectrum, constvolume or gridvolume (filename
-                                  or data, to_world, use_grid_bbox)
+        sigma_t  volume  1        extinction: a spectrum, constvolume or gridvolume (filename,
+                                  data or grid, to_world, use_grid_bbox)
         albedo   volume  0.75     single-scattering albedo (grids of one medium share to_world)
         scale    float   1        factor on the coefficients
         =======  ======  =======  =============================================================

@@ -747,7 +747,7 @@ def _volume(loader, p, form, emitter, unbounded):
     ======  ======  ========  =====================================================
     name    type    default   meaning
     ======  ======  ========  =====================================================
-    volume  volume  -         a ``gridvolume`` (``filename`` or ``data``, ``to_world``,
+    volume  volume  -         a ``gridvolume`` (``filename``, ``data`` or ``grid``, ``to_world``,
                               ``use_grid_bbox``) or a ``constvolume`` (required)
     ======  ======  ========  =====================================================
     """
