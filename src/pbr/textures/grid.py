@@ -83,16 +83,16 @@ def load_gridvolume(loader, p) -> tuple[np.ndarray, np.ndarray]:
     c) float32, to_world 4x4 of the unit cube). ``use_grid_bbox`` puts the file's bounding
     box into ``to_world``; only Mitsuba's defaults of ``filter_type`` ('trilinear') and
     ``wrap_mode`` ('clamp') are supported, and RGB grids are always upsampled (no ``raw``)."""
+    name = "filename" if p.has("filename") else "data" if p.has("data") else "grid"
     if p.has("filename"):
         data, bbox = read_vol(loader.resolve_path(p.string("filename"), p.key("filename")))
     elif p.has("data") or p.has("grid"):
         # 'grid': Mitsuba's form, an mi.VolumeGrid (numpy reads it as (nz, ny, nx[, c]))
-        name = "data" if p.has("data") else "grid"
         data, bbox = as_grid(np.asarray(p.raw(name)), p.key(name)), np.array([[0, 0, 0], [1, 1, 1.0]])
     else:
         raise p.error(None, "a gridvolume needs 'filename', 'grid' (an mi.VolumeGrid) or 'data' (an array)")
     if not np.all(np.isfinite(data)) or np.any(data < 0):
-        raise p.error("filename" if p.has("filename") else "data", "grid values must be finite and >= 0")
+        raise p.error(name, "grid values must be finite and >= 0")
     p.string("filter_type", "trilinear", choices=("trilinear",))
     p.string("wrap_mode", "clamp", choices=("clamp",))
     to_world = p.transform("to_world")
