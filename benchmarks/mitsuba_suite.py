@@ -221,6 +221,22 @@ def print_table(rows: list[Row], file=sys.stdout) -> None:
     print(f"\n{len(rows)} scenes: {loads} load, {passed} pass", file=file)
 
 
+def run_all(files: list[str], run, name, show_traceback: bool = False, width: int = 60) -> list[Row]:
+    """``run(f)`` (a Row) for each scene file, progress on stderr, then the table; an
+    exception of the runner itself becomes a row (``name(f)``: its scene name)."""
+    rows = []
+    for f in files:
+        try:
+            rows.append(run(f))
+        except Exception as e:   # a bug in the runner itself: report, go on
+            if show_traceback:
+                traceback.print_exc()
+            rows.append(Row(name(f), False, None, 0.0, "runner: " + _message(e)))
+        print(format_row(rows[-1], width), file=sys.stderr, flush=True)
+    print_table(rows)
+    return rows
+
+
 def main(argv=None) -> list[Row]:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", required=True, help="mitsuba-data root (or its tests/scenes folder)")
@@ -233,17 +249,8 @@ def main(argv=None) -> list[Row]:
     import pbr
     pbr.set_backend(args.backend)
     files = find_scenes(args.data, [s for s in args.scenes.split(",") if s])
-    rows = []
-    for f in files:
-        try:
-            rows.append(run_scene(f, args.spp or None, args.out or None))
-        except Exception as e:   # a bug in the runner itself: report, go on
-            if args.traceback:
-                traceback.print_exc()
-            rows.append(Row(os.path.basename(f), False, None, 0.0, "runner: " + _message(e)))
-        print(format_row(rows[-1], 60), file=sys.stderr, flush=True)
-    print_table(rows)
-    return rows
+    return run_all(files, lambda f: run_scene(f, args.spp or None, args.out or None), os.path.basename,
+                   args.traceback)
 
 
 if __name__ == "__main__":

@@ -30,7 +30,6 @@ import glob
 import os
 import sys
 import time
-import traceback
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -124,17 +123,8 @@ def main(argv=None) -> list[suite.Row]:
     import pbr
     pbr.set_backend(args.backend)
     root, files = find_scenes(args.data, [s for s in args.scenes.split(",") if s])
-    rows = []
-    for f in files:
-        try:
-            rows.append(run_scene(f, root, args.res, args.spp, args.batches, args.out or None))
-        except Exception as e:   # a bug in the runner itself: report, go on
-            if args.traceback:
-                traceback.print_exc()
-            rows.append(suite.Row(os.path.relpath(f, root), False, None, 0.0, "runner: " + suite._message(e)))
-        print(suite.format_row(rows[-1], 30), file=sys.stderr, flush=True)
-    suite.print_table(rows)
-    return rows
+    return suite.run_all(files, lambda f: run_scene(f, root, args.res, args.spp, args.batches, args.out or None),
+                         lambda f: os.path.relpath(f, root), args.traceback, width=30)
 
 
 if __name__ == "__main__":
