@@ -189,7 +189,7 @@ def fbm(perm, p, dpdx, dpdy, omega, max_octaves, unroll: int):
 
 # ------------------------------------------------------------------- mappings
 
-def _xform(m, v, point: bool):
+def xform_rows(m, v, point: bool):
     """3x4 rows ``m`` (flat list of 12) applied to ``v`` (a point adds the translation)."""
     out = []
     for r in range(3):
@@ -235,8 +235,8 @@ def map_2d(T, i, mapping_ids, uv, si, p, dpdx, dpdy, active):
             dudx = dudy = dvdx = dvdy = mi.Float(0.0)
         pick(MAP_UV, [dr.fma(su, uv.x, du), dr.fma(sv, uv.y, dv), su * dudx, su * dudy, sv * dvdx, sv * dvdy])
     if mapping_ids & {MAP_SPHERICAL, MAP_CYLINDRICAL, MAP_PLANAR}:
-        pt = _xform(m, p, True)
-        tx, ty = _xform(m, dpdx, False), _xform(m, dpdy, False)
+        pt = xform_rows(m, p, True)
+        tx, ty = xform_rows(m, dpdx, False), xform_rows(m, dpdy, False)
         x2y2 = dr.maximum(pt.x * pt.x + pt.y * pt.y, 1e-30)
         dsdp = mi.Vector3f(-pt.y, pt.x, 0.0) / (2.0 * math.pi * x2y2)
         if MAP_SPHERICAL in mapping_ids:
@@ -334,7 +334,7 @@ def evaluate(textures, i, uv, si, lam, active) -> mi.Spectrum:
     rgb = None
     if pats & {FBM, WRINKLED, WINDY, MARBLE, CHECKER3D}:
         m = [dr.gather(mi.Float, a, i, active) for a in T.m]
-        pt, tx, ty = _xform(m, p, True), _xform(m, dpdx, False), _xform(m, dpdy, False)
+        pt, tx, ty = xform_rows(m, p, True), xform_rows(m, dpdx, False), xform_rows(m, dpdy, False)
         omega = dr.gather(mi.Float, T.omega, i, active)
         octaves = dr.gather(mi.UInt32, T.octaves, i, active)
         if FBM in pats or WRINKLED in pats:

@@ -19,6 +19,7 @@ import numpy as np
 from .. import spectrum as spec
 from .grid import GridTable
 from .kinds import VOLUME, key_path
+from .procedural import xform_rows
 from .tables import VolumeTable
 
 
@@ -59,5 +60,4 @@ def evaluate(textures, i, uv, si, lam, active) -> mi.Spectrum:
     T = textures.tables.volumes
     p = si.p if si is not None else mi.Point3f(uv.x, uv.y, 0.0)
     m = [dr.gather(mi.Float, a, i, active) for a in T.m]
-    q = mi.Point3f(*(m[4 * r] * p.x + m[4 * r + 1] * p.y + m[4 * r + 2] * p.z + m[4 * r + 3] for r in range(3)))
-    return T.grids.lookup(i, q, lam, active, bounded=False)
+    return T.grids.lookup(i, mi.Point3f(xform_rows(m, p, True)), lam, active, bounded=False)
